@@ -1,0 +1,88 @@
+//! Exact unpolarised dielectric Fresnel reflectance, from air into a medium of index η > 1.
+//!
+//!     cos θt = sqrt(1 − sin²θi / η²)
+//!     rs = (cos θi − η cos θt) / (cos θi + η cos θt)
+//!     rp = (η cos θi − cos θt) / (η cos θi + cos θt)
+//!     F = (rs² + rp²) / 2,   T = 1 − F
+//!
+//! By reciprocity the same T applies to light leaving the medium at the outside angle θi.
+
+/// F with its derivatives with respect to cos θi and η.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FresnelEval {
+    pub reflectance: f64,
+    pub d_cos: f64,
+    pub d_eta: f64,
+}
+
+impl FresnelEval {
+    /// Transmission T = 1 − F.
+    pub fn transmission(&self) -> f64 {
+        1.0 - self.reflectance
+    }
+}
+
+/// Fresnel reflectance for cos θi in [0, 1] (clamped) and η ≥ 1.
+pub fn eval(cos_i: f64, eta: f64) -> FresnelEval {
+    let ci = cos_i.clamp(0.0, 1.0);
+    let si2 = 1.0 - ci * ci;
+    let ct2 = 1.0 - si2 / (eta * eta);
+    if ct2 <= 0.0 || (ci == 0.0 && eta <= 1.0) {
+        // Grazing incidence onto an index-matched medium: the limit is total reflection.
+        return FresnelEval { reflectance: 1.0, d_cos: 0.0, d_eta: 0.0 };
+    }
+    let ct = ct2.sqrt();
+    let dct_dci = ci / (eta * eta * ct);
+    let dct_deta = si2 / (eta * eta * eta * ct);
+    // r = (a − b)/(a + b): dr = 2 (b da − a db) / (a + b)².
+    let ratio = |a: f64, b: f64, da: f64, db: f64| {
+        let s = a + b;
+        ((a - b) / s, 2.0 * (b * da - a * db) / (s * s))
+    };
+    // rs: a = ci, b = η ct.
+    let (rs, drs_dci) = ratio(ci, eta * ct, 1.0, eta * dct_dci);
+    let (_, drs_deta) = ratio(ci, eta * ct, 0.0, ct + eta * dct_deta);
+    // rp: a = η ci, b = ct.
+    let (rp, drp_dci) = ratio(eta * ci, ct, eta, dct_dci);
+    let (_, drp_deta) = ratio(eta * ci, ct, ci, dct_deta);
+    FresnelEval {
+        reflectance: 0.5 * (rs * rs + rp * rp),
+        d_cos: rs * drs_dci + rp * drp_dci,
+        d_eta: rs * drs_deta + rp * drp_deta,
+    }
+}
+
+/// Fresnel reflectance alone.
+pub fn reflectance(cos_i: f64, eta: f64) -> f64 {
+    eval(cos_i, eta).reflectance
+}
+
+/// Fresnel transmission T = 1 − F.
+pub fn transmission(cos_i: f64, eta: f64) -> f64 {
+    1.0 - reflectance(cos_i, eta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normal_incidence_and_grazing() {
+        let eta: f64 = 1.5;
+        let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
+        assert!((reflectance(1.0, eta) - f0).abs() < 1e-15);
+        assert!((reflectance(0.0, eta) - 1.0).abs() < 1e-15);
+        assert!(reflectance(0.7, 1.0) < 1e-15);
+    }
+
+    #[test]
+    fn brewster_angle_zeroes_rp() {
+        // At Brewster's angle tan θ = η, rp = 0 and F = rs²/2.
+        let eta: f64 = 1.5;
+        let th = eta.atan();
+        let (ci, si) = (th.cos(), th.sin());
+        let ct = (1.0 - si * si / (eta * eta)).sqrt();
+        let rs = (ci - eta * ct) / (ci + eta * ct);
+        assert!((reflectance(ci, eta) - 0.5 * rs * rs).abs() < 1e-15);
+    }
+}

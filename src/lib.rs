@@ -1,0 +1,21 @@
+//! workbench: camera calibration and inverse rendering of translucent spheres, measuring a
+//! curvature-dependent reflectance function (CDRF).
+//!
+//! Conventions: millimetres; radians inside (degrees only in human-facing output); the OpenCV
+//! camera frame (x right, y down, z forward); light and view vectors point away from the surface.
+
+pub mod camera;
+pub mod cdrf;
+pub mod error;
+pub mod fresnel;
+pub mod intrinsics;
+pub mod model;
+pub mod output;
+pub mod photo;
+pub mod progress;
+pub mod session;
+pub mod specular;
+pub mod sphere;
+pub mod synth;
+
+pub use error::{Error, Result};

@@ -1,0 +1,310 @@
+//! The `workbench` command line: parse arguments, call the library, print.
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+use workbench::camera::{Camera, Distortion};
+use workbench::model::{LightAngles, Material, SpecularParams};
+use workbench::synth::checkerboard::{self, BoardFormat, CheckerConfig};
+use workbench::synth::session::{self, Format, Layout, SessionConfig};
+
+#[derive(Parser)]
+#[command(name = "workbench", version, about = "Measure the curvature-dependent reflectance of translucent materials")]
+struct Cli {
+    /// No progress bars.
+    #[arg(long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render ground-truth synthetic data.
+    #[command(subcommand)]
+    Synth(Synth),
+}
+
+#[derive(Subcommand)]
+enum Synth {
+    /// Photos of translucent spheres with known material, light and camera.
+    Session(SessionArgs),
+    /// Views of a planar chessboard with known camera and poses.
+    Checkerboard(CheckerArgs),
+}
+
+/// A comma-separated list (an alias, so clap takes it as one value).
+type Floats = Vec<f64>;
+
+/// Parse "a,b,c" into floats.
+fn floats(s: &str) -> Result<Floats, String> {
+    s.split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|_| format!("{t:?} is not a number")))
+        .collect()
+}
+
+fn triple(s: &str) -> Result<[f64; 3], String> {
+    let v = floats(s)?;
+    match v.len() {
+        1 => Ok([v[0]; 3]),
+        3 => Ok([v[0], v[1], v[2]]),
+        _ => Err("give one value or three (r,g,b)".into()),
+    }
+}
+
+#[derive(Args, Clone)]
+struct CameraArgs {
+    /// Image size WxH.
+    #[arg(long, default_value = "1280x960")]
+    size: String,
+    #[arg(long, default_value_t = 1400.0)]
+    fx: f64,
+    /// Defaults to fx.
+    #[arg(long)]
+    fy: Option<f64>,
+    /// Defaults to the image centre plus a small offset (643.2 for 1280 wide).
+    #[arg(long)]
+    cx: Option<f64>,
+    #[arg(long)]
+    cy: Option<f64>,
+    /// Distortion k1,k2,p1,p2,k3 (OpenCV order).
+    #[arg(long, default_value = "-0.12,0.08,0.0004,-0.0003,0", value_parser = floats, allow_hyphen_values = true)]
+    distortion: Floats,
+}
+
+impl CameraArgs {
+    fn camera(&self) -> Result<Camera> {
+        let (w, h) = self
+            .size
+            .split_once(['x', 'X'])
+            .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
+            .with_context(|| format!("--size {:?}: expected WIDTHxHEIGHT", self.size))?;
+        if w < 8 || h < 8 || w > 20000 || h > 20000 {
+            bail!("--size {w}x{h}: each side must be between 8 and 20000 pixels");
+        }
+        let d = &self.distortion;
+        if d.len() != 5 {
+            bail!("--distortion needs five numbers k1,k2,p1,p2,k3");
+        }
+        Ok(Camera {
+            fx: self.fx,
+            fy: self.fy.unwrap_or(self.fx),
+            cx: self.cx.unwrap_or(w as f64 * 0.5 + 3.2),
+            cy: self.cy.unwrap_or(h as f64 * 0.5 - 1.5),
+            distortion: Distortion { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: d[4] },
+            image_size: [w, h],
+        })
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum LayoutArg {
+    Separate,
+    Row,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FormatArg {
+    Png16,
+    Jpeg,
+}
+
+#[derive(Args)]
+struct SessionArgs {
+    /// Output folder (created; files in it are replaced).
+    #[arg(long)]
+    out: PathBuf,
+    /// Sphere radii in mm.
+    #[arg(long, default_value = "35,30,25,20,15", value_parser = floats)]
+    radii: Floats,
+    /// One photo per sphere, or all spheres in one photo.
+    #[arg(long, value_enum, default_value = "separate")]
+    layout: LayoutArg,
+    #[command(flatten)]
+    camera: CameraArgs,
+    /// Light azimuth in degrees (0 = from the camera, positive = from the right).
+    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true)]
+    light_azimuth: f64,
+    /// Light elevation in degrees (positive = from above).
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    light_elevation: f64,
+    /// Scattering length σ0 in mm, one value or r,g,b.
+    #[arg(long, default_value = "4,3,2.2", value_parser = triple)]
+    sigma0: [f64; 3],
+    /// Albedo, one value or r,g,b.
+    #[arg(long, default_value = "0.8,0.62,0.45", value_parser = triple)]
+    albedo: [f64; 3],
+    /// Index of refraction.
+    #[arg(long, default_value_t = 1.44)]
+    eta: f64,
+    /// Specular scale.
+    #[arg(long, default_value_t = 1.0)]
+    ks: f64,
+    /// GGX roughness.
+    #[arg(long, default_value_t = 0.1)]
+    alpha: f64,
+    /// Material name written into session.json.
+    #[arg(long, default_value = "synthetic wax")]
+    material: String,
+    /// Relative exposure (1 = 1/30 s, f/8, ISO 100).
+    #[arg(long, default_value_t = 1.2)]
+    exposure: f64,
+    /// Shot noise, standard deviation at full scale.
+    #[arg(long, default_value_t = 0.01)]
+    noise: f64,
+    /// Read noise, standard deviation relative to full scale.
+    #[arg(long, default_value_t = 5e-4)]
+    read_noise: f64,
+    /// Ambient floor relative to full scale.
+    #[arg(long, default_value_t = 2e-3)]
+    ambient: f64,
+    /// Edge supersampling n (n×n samples per silhouette pixel).
+    #[arg(long, default_value_t = 4)]
+    supersample: u32,
+    #[arg(long, value_enum, default_value = "png16")]
+    format: FormatArg,
+    #[arg(long, default_value_t = 95)]
+    jpeg_quality: u8,
+    /// Camera-to-sphere distance in mm (default: framed automatically).
+    #[arg(long)]
+    distance: Option<f64>,
+    /// What session.json's "intrinsics" points to; without it the true camera is written as
+    /// intrinsics.json in the output folder.
+    #[arg(long)]
+    intrinsics_ref: Option<String>,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Also write the first image as an 8-bit sRGB PNG here, for looking at.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct CheckerArgs {
+    /// Output folder (created; files in it are replaced).
+    #[arg(long)]
+    out: PathBuf,
+    /// Inner corners COLSxROWS.
+    #[arg(long, default_value = "9x6")]
+    pattern: String,
+    /// Square size in mm.
+    #[arg(long, default_value_t = 25.0)]
+    square: f64,
+    /// White margin in mm (default: one square).
+    #[arg(long)]
+    margin: Option<f64>,
+    #[arg(long, default_value_t = 15)]
+    views: u32,
+    #[command(flatten)]
+    camera: CameraArgs,
+    /// Blur σ in pixels.
+    #[arg(long, default_value_t = 0.7)]
+    blur: f64,
+    #[arg(long, default_value_t = 0.01)]
+    noise: f64,
+    #[arg(long, default_value_t = 2e-3)]
+    read_noise: f64,
+    /// Brightness loss at the frame corners (0..1).
+    #[arg(long, default_value_t = 0.3)]
+    vignetting: f64,
+    #[arg(long, default_value_t = 4)]
+    supersample: u32,
+    /// png or jpeg.
+    #[arg(long, default_value = "png")]
+    format: String,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
+    let cfg = SessionConfig {
+        radii_mm: a.radii,
+        layout: match a.layout {
+            LayoutArg::Separate => Layout::Separate,
+            LayoutArg::Row => Layout::Row,
+        },
+        camera: a.camera.camera()?,
+        light: LightAngles { azimuth: a.light_azimuth.to_radians(), elevation: a.light_elevation.to_radians() },
+        material: Material {
+            sigma0_mm: a.sigma0,
+            albedo: a.albedo,
+            eta: a.eta,
+            specular: SpecularParams { ks: a.ks, alpha: a.alpha },
+        },
+        material_name: a.material,
+        exposure: a.exposure,
+        noise: a.noise,
+        read_noise: a.read_noise,
+        ambient: a.ambient,
+        supersample: a.supersample,
+        format: match a.format {
+            FormatArg::Png16 => Format::Png16,
+            FormatArg::Jpeg => Format::Jpeg,
+        },
+        jpeg_quality: a.jpeg_quality,
+        seed: a.seed,
+        distance_mm: a.distance,
+        intrinsics_ref: a.intrinsics_ref,
+        ..SessionConfig::default()
+    };
+    let t0 = std::time::Instant::now();
+    let out = session::generate(&cfg, &a.out, a.preview.as_deref(), quiet).with_context(|| format!("synth session into {}", a.out.display()))?;
+    println!(
+        "wrote {} image(s), {} and {} in {:.2} s",
+        out.images.len(),
+        out.session_file.display(),
+        out.truth_file.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
+    let (cols, rows) = a
+        .pattern
+        .split_once(['x', 'X'])
+        .and_then(|(c, r)| Some((c.parse::<u32>().ok()?, r.parse::<u32>().ok()?)))
+        .with_context(|| format!("--pattern {:?}: expected COLSxROWS inner corners, e.g. 9x6", a.pattern))?;
+    let format = match a.format.to_ascii_lowercase().as_str() {
+        "png" => BoardFormat::Png,
+        "jpg" | "jpeg" => BoardFormat::Jpeg,
+        other => bail!("--format {other:?}: expected png or jpeg"),
+    };
+    let cfg = CheckerConfig {
+        inner: [cols, rows],
+        square_mm: a.square,
+        margin_mm: a.margin.unwrap_or(a.square),
+        views: a.views,
+        camera: a.camera.camera()?,
+        blur_px: a.blur,
+        noise: a.noise,
+        read_noise: a.read_noise,
+        vignetting: a.vignetting,
+        supersample: a.supersample,
+        format,
+        seed: a.seed,
+        ..CheckerConfig::default()
+    };
+    let t0 = std::time::Instant::now();
+    let out = checkerboard::generate(&cfg, &a.out, quiet)
+        .with_context(|| format!("synth checkerboard into {}", a.out.display()))?;
+    println!(
+        "wrote {} view(s) and {} in {:.2} s",
+        out.images.len(),
+        out.truth_file.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let res = match cli.command {
+        Command::Synth(Synth::Session(a)) => synth_session(a, cli.quiet),
+        Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
+    };
+    if let Err(e) = res {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

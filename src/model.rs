@@ -1,0 +1,181 @@
+//! The radiance model workbench fits, per colour channel c:
+//!
+//!     L_c = a_c · T(φ; η) · f(θ; σ0_c / r)  +  ks · D · G · F(l·h; η) / (4 n·v)
+//!
+//! with θ = angle(n, l), φ = angle(n, v), f the CDRF ([`crate::cdrf`]), T = 1 − F the exact
+//! exit-side Fresnel transmission ([`crate::fresnel`]), and the GGX lobe ([`crate::specular`]).
+//! The light's irradiance is folded into a_c and ks. The light direction is two angles
+//! ([`LightAngles`]). Parameters are physical here; the solver maps them to unbounded ones.
+
+use crate::cdrf::{self, Convolution};
+use crate::fresnel;
+use crate::specular;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Number of model parameters: σ0 ×3, albedo ×3, η, ks, α, light azimuth, light elevation.
+pub const N_PARAMS: usize = 11;
+/// Parameter indices into a gradient row.
+pub mod idx {
+    pub const SIGMA0: usize = 0; // .. 3
+    pub const ALBEDO: usize = 3; // .. 6
+    pub const ETA: usize = 6;
+    pub const KS: usize = 7;
+    pub const ALPHA: usize = 8;
+    pub const AZIMUTH: usize = 9;
+    pub const ELEVATION: usize = 10;
+}
+/// Human-readable parameter names, in index order.
+pub const PARAM_NAMES: [&str; N_PARAMS] = [
+    "sigma0_r", "sigma0_g", "sigma0_b", "albedo_r", "albedo_g", "albedo_b", "eta", "ks", "alpha",
+    "light_azimuth", "light_elevation",
+];
+
+/// Material parameters, named as in `truth.json` and `fit.json`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    /// Scattering length per channel (mm): σ = σ0 / r radians on a sphere of radius r.
+    pub sigma0_mm: [f64; 3],
+    /// Diffuse albedo per channel, light irradiance folded in.
+    pub albedo: [f64; 3],
+    /// Index of refraction.
+    pub eta: f64,
+    pub specular: SpecularParams,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpecularParams {
+    /// Lobe scale (light irradiance folded in; 1 for a physical dielectric lobe under unit light).
+    pub ks: f64,
+    /// GGX roughness α.
+    pub alpha: f64,
+}
+
+/// Light direction as azimuth and elevation (radians), camera frame:
+/// l = (cos e · sin a, −sin e, −cos e · cos a). (0, 0) is a light at the camera; positive azimuth
+/// is toward +x (right), positive elevation toward −y (up). Both poles (light straight above or
+/// below) are the only singular directions; the camera axis and the back-light are regular.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightAngles {
+    pub azimuth: f64,
+    pub elevation: f64,
+}
+
+impl LightAngles {
+    pub fn direction(&self) -> Vector3<f64> {
+        let (sa, ca) = self.azimuth.sin_cos();
+        let (se, ce) = self.elevation.sin_cos();
+        Vector3::new(ce * sa, -se, -ce * ca)
+    }
+
+    /// ∂l/∂azimuth and ∂l/∂elevation.
+    pub fn jacobian(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let (sa, ca) = self.azimuth.sin_cos();
+        let (se, ce) = self.elevation.sin_cos();
+        (Vector3::new(ce * ca, 0.0, ce * sa), Vector3::new(-se * sa, -ce, se * ca))
+    }
+
+    /// Angles of a direction (normalised first).
+    pub fn from_direction(l: &Vector3<f64>) -> LightAngles {
+        let l = l.normalize();
+        LightAngles { elevation: (-l.y).clamp(-1.0, 1.0).asin(), azimuth: l.x.atan2(-l.z) }
+    }
+}
+
+/// Everything the model needs besides geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    pub material: Material,
+    pub light: LightAngles,
+}
+
+impl Params {
+    pub fn to_vec(&self) -> [f64; N_PARAMS] {
+        let m = &self.material;
+        [
+            m.sigma0_mm[0], m.sigma0_mm[1], m.sigma0_mm[2], m.albedo[0], m.albedo[1], m.albedo[2],
+            m.eta, m.specular.ks, m.specular.alpha, self.light.azimuth, self.light.elevation,
+        ]
+    }
+
+    pub fn from_vec(p: &[f64; N_PARAMS]) -> Params {
+        Params {
+            material: Material {
+                sigma0_mm: [p[0], p[1], p[2]],
+                albedo: [p[3], p[4], p[5]],
+                eta: p[6],
+                specular: SpecularParams { ks: p[7], alpha: p[8] },
+            },
+            light: LightAngles { azimuth: p[9], elevation: p[10] },
+        }
+    }
+}
+
+/// Per-pixel geometry: unit normal, unit view vector, local radius of curvature (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    pub normal: Vector3<f64>,
+    pub view: Vector3<f64>,
+    pub radius_mm: f64,
+}
+
+/// The radiance model with its structural choices.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Model {
+    pub convolution: Convolution,
+}
+
+/// Model output for one pixel: RGB radiance and, optionally, ∂L_c/∂p for every parameter.
+pub type Rgb = [f64; 3];
+pub type Gradient = [[f64; N_PARAMS]; 3];
+
+impl Model {
+    /// RGB radiance at one surface point.
+    pub fn radiance(&self, p: &Params, g: &Geometry) -> Rgb {
+        self.eval(p, g, false).0
+    }
+
+    /// RGB radiance and its gradient with respect to all [`N_PARAMS`] parameters.
+    pub fn radiance_with_gradient(&self, p: &Params, g: &Geometry) -> (Rgb, Gradient) {
+        self.eval(p, g, true)
+    }
+
+    fn eval(&self, p: &Params, g: &Geometry, want_grad: bool) -> (Rgb, Gradient) {
+        let mut out = [0.0; 3];
+        let mut grad = [[0.0; N_PARAMS]; 3];
+        let nv = g.normal.dot(&g.view);
+        if nv <= 0.0 {
+            return (out, grad);
+        }
+        let m = &p.material;
+        let l = p.light.direction();
+        let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
+        let lv = l.dot(&g.view).clamp(-1.0, 1.0);
+        let theta = nl.acos();
+        let fr = fresnel::eval(nv, m.eta);
+        let t_exit = fr.transmission();
+        let spec =
+            specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
+        let (dl_da, dl_de) = if want_grad { p.light.jacobian() } else { Default::default() };
+        for c in 0..3 {
+            let sigma = m.sigma0_mm[c] / g.radius_mm;
+            let f = cdrf::eval(theta, sigma, self.convolution);
+            out[c] = m.albedo[c] * t_exit * f.value + spec.value;
+            if !want_grad {
+                continue;
+            }
+            let row = &mut grad[c];
+            row[idx::SIGMA0 + c] = m.albedo[c] * t_exit * f.d_sigma / g.radius_mm;
+            row[idx::ALBEDO + c] = t_exit * f.value;
+            row[idx::ETA] = -m.albedo[c] * f.value * fr.d_eta + spec.d_eta;
+            row[idx::KS] = spec.d_ks;
+            row[idx::ALPHA] = spec.d_alpha;
+            // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
+            let d_nl = m.albedo[c] * t_exit * f.d_cos(theta) + spec.d_nl;
+            let dl = g.normal * d_nl + g.view * spec.d_lv;
+            row[idx::AZIMUTH] = dl.dot(&dl_da);
+            row[idx::ELEVATION] = dl.dot(&dl_de);
+        }
+        (out, grad)
+    }
+}

@@ -1,0 +1,105 @@
+//! `session.json` (schema `workbench.session/1`): what a user writes by hand to describe a photo
+//! session of spheres. Relative paths are relative to the session file.
+
+use crate::error::{Error, Result};
+use crate::output::read_json;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub const SCHEMA: &str = "workbench.session/1";
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionSphere {
+    pub radius_mm: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionImage {
+    pub file: String,
+    /// Spheres in the photo, left to right.
+    pub spheres: Vec<SessionSphere>,
+    /// Relative exposure (see [`crate::photo`]); overrides EXIF.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure: Option<f64>,
+    /// Whether pixel values are linear; default: 16-bit/float linear, 8-bit sRGB.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear: Option<bool>,
+}
+
+/// One light for the whole session (default) or one per photo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LightMode {
+    #[default]
+    Shared,
+    PerImage,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Session {
+    pub schema: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<String>,
+    /// Path of an `intrinsics.json`; without it the camera is treated as orthographic.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intrinsics: Option<String>,
+    #[serde(default, skip_serializing_if = "is_shared")]
+    pub light: LightMode,
+    pub images: Vec<SessionImage>,
+}
+
+fn is_shared(m: &LightMode) -> bool {
+    *m == LightMode::Shared
+}
+
+impl Session {
+    /// Read and validate a session file (a folder means its `session.json`).
+    pub fn load(path: &Path) -> Result<(Session, PathBuf)> {
+        let file = if path.is_dir() { path.join("session.json") } else { path.to_path_buf() };
+        let s: Session = read_json(&file)?;
+        s.validate(&file)?;
+        Ok((s, file))
+    }
+
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::invalid(file, msg));
+        if self.schema != SCHEMA {
+            return bad(format!("schema is {:?}, expected {SCHEMA:?}", self.schema));
+        }
+        if self.images.is_empty() {
+            return bad("no images listed".into());
+        }
+        for (i, im) in self.images.iter().enumerate() {
+            if im.file.trim().is_empty() {
+                return bad(format!("images[{i}] has an empty file name"));
+            }
+            if im.spheres.is_empty() {
+                return bad(format!("images[{i}] ({}) lists no spheres", im.file));
+            }
+            for (j, s) in im.spheres.iter().enumerate() {
+                if !(s.radius_mm.is_finite() && s.radius_mm > 0.0 && s.radius_mm < 1e5) {
+                    return bad(format!(
+                        "images[{i}] ({}) sphere {j}: radius_mm must be a positive number of mm, got {}",
+                        im.file, s.radius_mm
+                    ));
+                }
+            }
+            if let Some(e) = im.exposure {
+                if !(e.is_finite() && e > 0.0) {
+                    return bad(format!("images[{i}] ({}): exposure must be positive, got {e}", im.file));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Resolve a path written in the session file.
+    pub fn resolve(session_file: &Path, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            session_file.parent().unwrap_or(Path::new(".")).join(p)
+        }
+    }
+}

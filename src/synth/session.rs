@@ -1,0 +1,460 @@
+//! `workbench synth session`: render a photo session of translucent spheres with known truth.
+//!
+//! Interior pixels are the model evaluated at the pixel centre's ray (the detector and solver
+//! sample there too); pixels within a few pixels of a silhouette are supersampled n×n so edges are
+//! anti-aliased. A constant ambient floor is added everywhere (stray light of a dark room), then
+//! shot and read noise, then clipping at full scale.
+
+use crate::camera::Camera;
+use crate::cdrf::Convolution;
+use crate::error::{Error, Result};
+use crate::intrinsics::IntrinsicsFile;
+use crate::model::{Geometry, LightAngles, Material, Model, Params, SpecularParams};
+use crate::output::write_json;
+use crate::photo::{self, ExifInfo};
+use crate::session::{self, Session, SessionImage, SessionSphere};
+use crate::sphere::{EllipseJson, Sphere};
+use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub const TRUTH_SCHEMA: &str = "workbench.truth/1";
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Layout {
+    /// One photo per sphere, every sphere at the same place (the camera and light stay put while
+    /// spheres are swapped).
+    Separate,
+    /// All spheres in one photo, left to right in the order given.
+    Row,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// 16-bit linear RGB PNG (exposure written into session.json: PNG carries no EXIF here).
+    Png16,
+    /// 8-bit sRGB JPEG with EXIF exposure settings.
+    Jpeg,
+}
+
+/// Everything that defines a synthetic session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionConfig {
+    pub radii_mm: Vec<f64>,
+    pub layout: Layout,
+    pub camera: Camera,
+    pub light: LightAngles,
+    pub material: Material,
+    pub material_name: String,
+    pub convolution: Convolution,
+    /// Relative exposure (see [`crate::photo`]).
+    pub exposure: f64,
+    /// Shot-noise standard deviation at full scale (relative; variance ∝ signal).
+    pub noise: f64,
+    /// Read-noise standard deviation (relative to full scale).
+    pub read_noise: f64,
+    /// Constant stray-light floor added to every pixel (relative to full scale).
+    pub ambient: f64,
+    /// Edge supersampling: n×n samples per silhouette pixel.
+    pub supersample: u32,
+    pub format: Format,
+    pub jpeg_quality: u8,
+    pub seed: u64,
+    /// Camera-to-sphere distance (mm); chosen to frame the spheres when absent.
+    pub distance_mm: Option<f64>,
+    /// What session.json's "intrinsics" says; absent: the true camera is written as
+    /// `intrinsics.json` beside it.
+    pub intrinsics_ref: Option<String>,
+    /// Sensor width (mm), for the EXIF focal length.
+    pub sensor_width_mm: f64,
+}
+
+/// The default camera of synthetic data: 1280×960, f = 1400 px, mild barrel distortion.
+pub fn default_camera() -> Camera {
+    Camera {
+        fx: 1400.0,
+        fy: 1400.0,
+        cx: 643.2,
+        cy: 478.5,
+        distortion: crate::camera::Distortion { k1: -0.12, k2: 0.08, p1: 4e-4, p2: -3e-4, k3: 0.0 },
+        image_size: [1280, 960],
+    }
+}
+
+impl Default for SessionConfig {
+    fn default() -> Self {
+        SessionConfig {
+            radii_mm: vec![35.0, 30.0, 25.0, 20.0, 15.0],
+            layout: Layout::Separate,
+            camera: default_camera(),
+            light: LightAngles { azimuth: 70f64.to_radians(), elevation: 20f64.to_radians() },
+            material: Material {
+                sigma0_mm: [4.0, 3.0, 2.2],
+                albedo: [0.80, 0.62, 0.45],
+                eta: 1.44,
+                specular: SpecularParams { ks: 1.0, alpha: 0.1 },
+            },
+            material_name: "synthetic wax".into(),
+            convolution: Convolution::Wrapped,
+            exposure: 1.2,
+            noise: 0.01,
+            read_noise: 5e-4,
+            ambient: 2e-3,
+            supersample: 4,
+            format: Format::Png16,
+            jpeg_quality: 95,
+            seed: 1,
+            distance_mm: None,
+            intrinsics_ref: None,
+            sensor_width_mm: 23.5,
+        }
+    }
+}
+
+/// truth.json of a session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionTruth {
+    pub schema: String,
+    pub kind: String,
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub eta: f64,
+    pub specular: SpecularParams,
+    /// Unit vector toward the light, camera frame (x right, y down, z forward).
+    pub light_direction: [f64; 3],
+    pub light_azimuth_deg: f64,
+    pub light_elevation_deg: f64,
+    pub cdrf_convolution: Convolution,
+    pub intrinsics: IntrinsicsFile,
+    pub images: Vec<TruthImage>,
+    pub render: RenderTruth,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TruthImage {
+    pub file: String,
+    pub exposure: f64,
+    pub spheres: Vec<TruthSphere>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TruthSphere {
+    pub radius_mm: f64,
+    pub center_mm: [f64; 3],
+    /// Silhouette ellipse in ideal (undistorted) pinhole pixel coordinates.
+    pub ellipse: EllipseJson,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderTruth {
+    pub noise: f64,
+    pub read_noise: f64,
+    pub ambient: f64,
+    pub supersample: u32,
+    pub format: Format,
+    pub seed: u64,
+    pub layout: Layout,
+}
+
+/// One image of the session: its file name and spheres (left to right).
+#[derive(Clone, Debug)]
+pub struct ScenePlan {
+    pub file: String,
+    pub spheres: Vec<(f64, Sphere)>,
+}
+
+fn check(cfg: &SessionConfig) -> Result<()> {
+    let arg = |m: String| Err(Error::Argument(m));
+    if cfg.radii_mm.is_empty() {
+        return arg("at least one radius is needed".into());
+    }
+    if let Some(r) = cfg.radii_mm.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
+        return arg(format!("radius {r} mm is not positive"));
+    }
+    let m = &cfg.material;
+    let all_pos = m.sigma0_mm.iter().chain(&m.albedo).all(|v| v.is_finite() && *v >= 0.0);
+    if !all_pos || !(m.eta >= 1.0) || !(m.specular.ks >= 0.0) || !(m.specular.alpha > 0.0) {
+        return arg("material: σ0 and albedo must be ≥ 0, η ≥ 1, ks ≥ 0 and α > 0".into());
+    }
+    let nums = [cfg.exposure, cfg.noise, cfg.read_noise, cfg.ambient];
+    if !nums.iter().all(|v| v.is_finite() && *v >= 0.0) || cfg.exposure <= 0.0 {
+        return arg("exposure must be positive and noise, read noise and ambient ≥ 0".into());
+    }
+    if cfg.supersample == 0 || cfg.supersample > 16 {
+        return arg("supersample must be between 1 and 16".into());
+    }
+    let c = &cfg.camera;
+    if !(c.fx > 0.0 && c.fy > 0.0) || c.image_size.contains(&0) {
+        return arg("camera: focal lengths and image size must be positive".into());
+    }
+    Ok(())
+}
+
+/// Whether every sphere's silhouette lies inside the frame with a margin (pixels).
+fn fits_in_frame(cam: &Camera, spheres: &[(f64, Sphere)], margin: f64) -> bool {
+    let (w, h) = (cam.width() as f64, cam.height() as f64);
+    spheres.iter().all(|(_, s)| {
+        let Some(half) = s.cone_half_angle() else { return false };
+        let axis = s.center.normalize();
+        let e1 = axis.cross(&Vector3::y()).normalize();
+        let e2 = axis.cross(&e1);
+        (0..72).all(|k| {
+            let t = k as f64 * std::f64::consts::TAU / 72.0;
+            let d = axis * half.cos() + (e1 * t.cos() + e2 * t.sin()) * half.sin();
+            match cam.pixel_for_ray(&d) {
+                Some(p) => p.x > margin && p.y > margin && p.x < w - margin && p.y < h - margin,
+                None => false,
+            }
+        })
+    })
+}
+
+/// Where the spheres go: a fixed camera-to-sphere distance, chosen (unless given) so that the
+/// largest sphere fills about a third of the frame height (separate photos) or the row fills
+/// about 85% of the width; then pushed back until every silhouette clears the frame edge.
+pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
+    check(cfg)?;
+    let cam = &cfg.camera;
+    let r_max = cfg.radii_mm.iter().cloned().fold(0.0, f64::max);
+    let r_min = cfg.radii_mm.iter().cloned().fold(f64::INFINITY, f64::min);
+    let gap = 0.5 * r_min;
+    let row_width: f64 = cfg.radii_mm.iter().map(|r| 2.0 * r).sum::<f64>()
+        + gap * (cfg.radii_mm.len() as f64 - 1.0);
+    let mut z = cfg.distance_mm.unwrap_or(match cfg.layout {
+        Layout::Separate => r_max * cam.fy / (0.17 * cam.height() as f64),
+        Layout::Row => row_width * cam.fx / (0.85 * cam.width() as f64),
+    });
+    let name = |r: f64, i: usize| {
+        let dup = cfg.radii_mm.iter().filter(|&&q| q == r).count() > 1;
+        let base = if r.fract() == 0.0 { format!("r{r:.0}") } else { format!("r{r}") };
+        if dup { format!("{base}-{}", i + 1) } else { base }
+    };
+    let ext = match cfg.format {
+        Format::Png16 => "png",
+        Format::Jpeg => "jpg",
+    };
+    for _ in 0..60 {
+        let plans: Vec<ScenePlan> = match cfg.layout {
+            Layout::Separate => cfg
+                .radii_mm
+                .iter()
+                .enumerate()
+                .map(|(i, &r)| ScenePlan {
+                    file: format!("{}.{ext}", name(r, i)),
+                    spheres: vec![(r, Sphere::new(Vector3::new(0.04 * z, -0.03 * z, z), r))],
+                })
+                .collect(),
+            Layout::Row => {
+                let mut x = -0.5 * row_width;
+                let spheres = cfg
+                    .radii_mm
+                    .iter()
+                    .map(|&r| {
+                        let s = Sphere::new(Vector3::new(x + r, 0.0, z), r);
+                        x += 2.0 * r + gap;
+                        (r, s)
+                    })
+                    .collect();
+                vec![ScenePlan { file: format!("row.{ext}"), spheres }]
+            }
+        };
+        let all_fit = plans.iter().all(|p| fits_in_frame(cam, &p.spheres, 6.0));
+        if all_fit {
+            return Ok(plans);
+        }
+        if cfg.distance_mm.is_some() {
+            return Err(Error::Argument(format!(
+                "at a distance of {z} mm the spheres do not fit in the {}×{} frame",
+                cam.width(),
+                cam.height()
+            )));
+        }
+        z *= 1.05;
+    }
+    Err(Error::Argument("cannot frame the spheres: check the camera".into()))
+}
+
+/// Linear radiance-times-exposure (plus ambient) along one ray: the nearest sphere hit, or the
+/// ambient floor.
+fn shade(cfg: &SessionConfig, model: &Model, params: &Params, spheres: &[(f64, Sphere)], d: &Vector3<f64>) -> [f64; 3] {
+    let mut best: Option<(f64, usize)> = None;
+    for (i, (_, s)) in spheres.iter().enumerate() {
+        if let Some(t) = s.intersect(d) {
+            if best.is_none_or(|(bt, _)| t < bt) {
+                best = Some((t, i));
+            }
+        }
+    }
+    let Some((_, i)) = best else { return [cfg.ambient; 3] };
+    let (r, s) = &spheres[i];
+    let Some(sp) = s.surface_at(d) else { return [cfg.ambient; 3] };
+    let g = Geometry { normal: sp.normal, view: sp.view, radius_mm: *r };
+    let l = model.radiance(params, &g);
+    [0, 1, 2].map(|c| cfg.exposure * l[c] + cfg.ambient)
+}
+
+/// Render one image to linear RGB (noise-free), row-major, 3 values a pixel.
+pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64> {
+    let cam = &cfg.camera;
+    let (w, h) = (cam.width() as usize, cam.height() as usize);
+    let model = Model { convolution: cfg.convolution };
+    let params = Params { material: cfg.material, light: cfg.light };
+    // A pixel is an edge pixel when its centre ray is within this angle of a silhouette.
+    let margin = 2.5 * cam.pixel_angle();
+    let n = cfg.supersample as usize;
+    let mut img = vec![0.0; w * h * 3];
+    img.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+        for x in 0..w {
+            let px = Vector2::new(x as f64, y as f64);
+            let Some(d) = cam.ray_for_pixel(px) else {
+                row[3 * x..3 * x + 3].copy_from_slice(&[cfg.ambient; 3]);
+                continue;
+            };
+            let near_edge = n > 1
+                && spheres.iter().any(|(_, s)| s.angle_outside(&d).is_some_and(|a| a.abs() < margin));
+            let v = if near_edge {
+                let mut acc = [0.0; 3];
+                for j in 0..n {
+                    for i in 0..n {
+                        let sub = px
+                            + Vector2::new((i as f64 + 0.5) / n as f64 - 0.5, (j as f64 + 0.5) / n as f64 - 0.5);
+                        let v = match cam.ray_for_pixel(sub) {
+                            Some(ds) => shade(cfg, &model, &params, spheres, &ds),
+                            None => [cfg.ambient; 3],
+                        };
+                        (0..3).for_each(|c| acc[c] += v[c]);
+                    }
+                }
+                acc.map(|a| a / (n * n) as f64)
+            } else {
+                shade(cfg, &model, &params, spheres, &d)
+            };
+            row[3 * x..3 * x + 3].copy_from_slice(&v);
+        }
+    });
+    img
+}
+
+/// What `synth session` wrote.
+#[derive(Debug)]
+pub struct SessionOutput {
+    pub session_file: PathBuf,
+    pub truth_file: PathBuf,
+    pub images: Vec<PathBuf>,
+    pub truth: SessionTruth,
+}
+
+/// Render the session into `out` (created if needed): the images, `session.json`, `truth.json`,
+/// and `intrinsics.json` when no intrinsics reference is given. `preview`: also write the first
+/// image as an 8-bit sRGB PNG there (for looking at, not for measuring).
+pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: bool) -> Result<SessionOutput> {
+    let plans = plan(cfg)?;
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let cam = &cfg.camera;
+    let (w, h) = (cam.width() as usize, cam.height() as usize);
+    let pb = crate::progress::bar(plans.len() as u64, "rendering", quiet);
+    let focal_mm = cam.fx * cfg.sensor_width_mm / cam.width() as f64;
+    let f35 = (focal_mm * 36.0 / cfg.sensor_width_mm).round() as u32;
+    let exif = ExifInfo::for_exposure(cfg.exposure, "workbench", "synthetic camera", focal_mm, f35);
+    let mut images = Vec::new();
+    let mut truth_images = Vec::new();
+    let mut session_images = Vec::new();
+    for (k, p) in plans.iter().enumerate() {
+        let lin = render_linear(cfg, &p.spheres);
+        let path = out.join(&p.file);
+        let noisy: Vec<f64> = {
+            let mut v = vec![0.0; lin.len()];
+            v.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+                let mut rng = super::row_rng(cfg.seed, k as u64, y as u64);
+                for (o, i) in row.iter_mut().zip(&lin[y * w * 3..(y + 1) * w * 3]) {
+                    *o = super::sensor(*i, cfg.noise, cfg.read_noise, &mut rng);
+                }
+            });
+            v
+        };
+        if let (0, Some(pv)) = (k, preview) {
+            let q: Vec<u8> = noisy.iter().map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8).collect();
+            photo::write_8bit(pv, w as u32, h as u32, 3, &q, 0, None)?;
+        }
+        match cfg.format {
+            Format::Png16 => {
+                let q: Vec<u16> = noisy.iter().map(|v| (v * 65535.0).round() as u16).collect();
+                photo::write_png16_rgb(&path, w as u32, h as u32, &q)?;
+            }
+            Format::Jpeg => {
+                let q: Vec<u8> = noisy.iter().map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8).collect();
+                photo::write_8bit(&path, w as u32, h as u32, 3, &q, cfg.jpeg_quality, Some(&exif))?;
+            }
+        }
+        images.push(path);
+        truth_images.push(TruthImage {
+            file: p.file.clone(),
+            exposure: cfg.exposure,
+            spheres: p
+                .spheres
+                .iter()
+                .map(|(r, s)| TruthSphere {
+                    radius_mm: *r,
+                    center_mm: [s.center.x, s.center.y, s.center.z],
+                    ellipse: s.image_ellipse(cam).expect("sphere in front of the camera").into(),
+                })
+                .collect(),
+        });
+        session_images.push(SessionImage {
+            file: p.file.clone(),
+            spheres: p.spheres.iter().map(|(r, _)| SessionSphere { radius_mm: *r }).collect(),
+            exposure: (cfg.format == Format::Png16).then_some(cfg.exposure),
+            linear: None,
+        });
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+
+    let intrinsics_ref = match &cfg.intrinsics_ref {
+        Some(r) => r.clone(),
+        None => {
+            crate::output::write_json(&out.join("intrinsics.json"), &IntrinsicsFile::from_truth(cam))?;
+            "intrinsics.json".into()
+        }
+    };
+    let session = Session {
+        schema: session::SCHEMA.into(),
+        material: Some(cfg.material_name.clone()),
+        intrinsics: Some(intrinsics_ref),
+        light: Default::default(),
+        images: session_images,
+    };
+    let l = cfg.light.direction();
+    let m = &cfg.material;
+    let truth = SessionTruth {
+        schema: TRUTH_SCHEMA.into(),
+        kind: "session".into(),
+        sigma0_mm: m.sigma0_mm,
+        albedo: m.albedo,
+        eta: m.eta,
+        specular: m.specular,
+        light_direction: [l.x, l.y, l.z],
+        light_azimuth_deg: cfg.light.azimuth.to_degrees(),
+        light_elevation_deg: cfg.light.elevation.to_degrees(),
+        cdrf_convolution: cfg.convolution,
+        intrinsics: IntrinsicsFile::from_truth(cam),
+        images: truth_images,
+        render: RenderTruth {
+            noise: cfg.noise,
+            read_noise: cfg.read_noise,
+            ambient: cfg.ambient,
+            supersample: cfg.supersample,
+            format: cfg.format,
+            seed: cfg.seed,
+            layout: cfg.layout,
+        },
+    };
+    let session_file = out.join("session.json");
+    let truth_file = out.join("truth.json");
+    write_json(&session_file, &session)?;
+    write_json(&truth_file, &truth)?;
+    Ok(SessionOutput { session_file, truth_file, images, truth })
+}

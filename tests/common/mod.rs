@@ -1,0 +1,69 @@
+//! Independent numerical tools for the tests: adaptive quadrature and finite differences.
+#![allow(dead_code)]
+
+/// Gauss–Kronrod 7/15 on [a, b]: (Kronrod estimate, |Kronrod − Gauss|).
+fn gk15(f: &dyn Fn(f64) -> f64, a: f64, b: f64) -> (f64, f64) {
+    const XK: [f64; 8] = [
+        0.991_455_371_120_812_6, 0.949_107_912_342_758_5, 0.864_864_423_359_769_1,
+        0.741_531_185_599_394_4, 0.586_087_235_467_691_1, 0.405_845_151_377_397_2,
+        0.207_784_955_007_898_5, 0.0,
+    ];
+    const WK: [f64; 8] = [
+        0.022_935_322_010_529_22, 0.063_092_092_629_978_55, 0.104_790_010_322_250_2,
+        0.140_653_259_715_525_9, 0.169_004_726_639_267_9, 0.190_350_578_064_785_4,
+        0.204_432_940_075_298_9, 0.209_482_141_084_727_8,
+    ];
+    const WG: [f64; 4] = [
+        0.129_484_966_168_869_7, 0.279_705_391_489_276_7, 0.381_830_050_505_118_9,
+        0.417_959_183_673_469_4,
+    ];
+    let c = 0.5 * (a + b);
+    let h = 0.5 * (b - a);
+    let fc = f(c);
+    let mut k = WK[7] * fc;
+    let mut g = WG[3] * fc;
+    for i in 0..7 {
+        let x = h * XK[i];
+        let (f1, f2) = (f(c - x), f(c + x));
+        k += WK[i] * (f1 + f2);
+        if i % 2 == 1 {
+            g += WG[i / 2] * (f1 + f2);
+        }
+    }
+    (k * h, ((k - g) * h).abs())
+}
+
+/// Adaptive Gauss–Kronrod quadrature to an absolute tolerance.
+pub fn integrate(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64) -> f64 {
+    fn rec(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64, depth: u32) -> f64 {
+        let (v, err) = gk15(f, a, b);
+        if err <= tol || depth > 60 || (b - a).abs() < 1e-15 {
+            return v;
+        }
+        let m = 0.5 * (a + b);
+        rec(f, a, m, 0.5 * tol, depth + 1) + rec(f, m, b, 0.5 * tol, depth + 1)
+    }
+    rec(f, a, b, tol, 0)
+}
+
+/// Central difference with one Richardson step (error O(h⁴)).
+pub fn derivative(f: &dyn Fn(f64) -> f64, x: f64, h: f64) -> f64 {
+    let d = |h: f64| (f(x + h) - f(x - h)) / (2.0 * h);
+    (4.0 * d(0.5 * h) - d(h)) / 3.0
+}
+
+/// |a − b| ≤ rel·|b| + abs.
+pub fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
+    (a - b).abs() <= rel * b.abs() + abs
+}
+
+/// ../shared/data, or None with a printed reason.
+pub fn shared_data() -> Option<std::path::PathBuf> {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {} is absent", p.display());
+        None
+    }
+}
