@@ -159,7 +159,8 @@ impl Camera {
 
     /// Unit ray direction through a pixel.
     pub fn ray_for_pixel(&self, px: Vector2<f64>) -> Option<Vector3<f64>> {
-        self.undistort_pixel(px).map(|n| Vector3::new(n.x, n.y, 1.0).normalize())
+        self.undistort_pixel(px)
+            .map(|n| Vector3::new(n.x, n.y, 1.0).normalize())
     }
 
     /// Pixel footprint in normalised units at the image centre (1/f).
@@ -174,7 +175,13 @@ mod tests {
 
     #[test]
     fn jacobian_matches_finite_differences() {
-        let d = Distortion { k1: -0.3, k2: 0.1, p1: 0.002, p2: -0.001, k3: 0.02 };
+        let d = Distortion {
+            k1: -0.3,
+            k2: 0.1,
+            p1: 0.002,
+            p2: -0.001,
+            k3: 0.02,
+        };
         let p = Vector2::new(0.31, -0.22);
         let (_, j) = d.apply_with_jacobian(p);
         let h = 1e-6;
@@ -183,7 +190,12 @@ mod tests {
             e[c] = h;
             let fd = (d.apply(p + e) - d.apply(p - e)) / (2.0 * h);
             for r in 0..2 {
-                assert!((fd[r] - j[(r, c)]).abs() < 1e-8, "{r},{c}: {} {}", fd[r], j[(r, c)]);
+                assert!(
+                    (fd[r] - j[(r, c)]).abs() < 1e-8,
+                    "{r},{c}: {} {}",
+                    fd[r],
+                    j[(r, c)]
+                );
             }
         }
     }

@@ -72,9 +72,19 @@ fn gauss(t: f64, sigma: f64) -> f64 {
 fn clamped_cosine(theta: f64) -> CdrfEval {
     let c = theta.cos();
     if c > 0.0 {
-        CdrfEval { value: c, d_theta: -theta.sin(), d2_theta: -c, d_sigma: 0.0 }
+        CdrfEval {
+            value: c,
+            d_theta: -theta.sin(),
+            d2_theta: -c,
+            d_sigma: 0.0,
+        }
     } else {
-        CdrfEval { value: 0.0, d_theta: 0.0, d2_theta: 0.0, d_sigma: 0.0 }
+        CdrfEval {
+            value: 0.0,
+            d_theta: 0.0,
+            d2_theta: 0.0,
+            d_sigma: 0.0,
+        }
     }
 }
 
@@ -108,7 +118,12 @@ fn line(theta: f64, sigma: f64) -> CdrfEval {
     let value = z.re;
     let d_theta = -z.im * theta.signum();
     let d2_theta = -value + gauss(theta - FRAC_PI_2, sigma) + gauss(theta + FRAC_PI_2, sigma);
-    CdrfEval { value, d_theta, d2_theta, d_sigma: sigma * d2_theta }
+    CdrfEval {
+        value,
+        d_theta,
+        d2_theta,
+        d_sigma: sigma * d2_theta,
+    }
 }
 
 /// Fourier series of the wrapped form, used for wide blurs:
@@ -135,7 +150,12 @@ fn wrapped_fourier(theta: f64, sigma: f64) -> CdrfEval {
         sign = -sign;
         n += 2.0;
     }
-    CdrfEval { value, d_theta, d2_theta, d_sigma: sigma * d2_theta }
+    CdrfEval {
+        value,
+        d_theta,
+        d2_theta,
+        d_sigma: sigma * d2_theta,
+    }
 }
 
 /// Reduce θ to [−π, π].
@@ -210,7 +230,12 @@ mod tests {
                 b.d_theta += e.d_theta;
                 b.d_sigma += e.d_sigma;
             }
-            assert!((a.value - b.value).abs() < 1e-13, "{t}: {} {}", a.value, b.value);
+            assert!(
+                (a.value - b.value).abs() < 1e-13,
+                "{t}: {} {}",
+                a.value,
+                b.value
+            );
             assert!((a.d_theta - b.d_theta).abs() < 1e-12);
             assert!((a.d_sigma - b.d_sigma).abs() < 1e-12);
         }

@@ -29,7 +29,11 @@ pub fn eval(cos_i: f64, eta: f64) -> FresnelEval {
     let ct2 = 1.0 - si2 / (eta * eta);
     if ct2 <= 0.0 || (ci == 0.0 && eta <= 1.0) {
         // Grazing incidence onto an index-matched medium: the limit is total reflection.
-        return FresnelEval { reflectance: 1.0, d_cos: 0.0, d_eta: 0.0 };
+        return FresnelEval {
+            reflectance: 1.0,
+            d_cos: 0.0,
+            d_eta: 0.0,
+        };
     }
     let ct = ct2.sqrt();
     let dct_dci = ci / (eta * eta * ct);

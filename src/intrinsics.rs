@@ -81,12 +81,20 @@ impl IntrinsicsFile {
     pub fn load(path: &Path) -> Result<Self> {
         let f: IntrinsicsFile = read_json(path)?;
         if f.schema != SCHEMA {
-            return Err(Error::invalid(path, format!("schema is {:?}, expected {SCHEMA:?}", f.schema)));
+            return Err(Error::invalid(
+                path,
+                format!("schema is {:?}, expected {SCHEMA:?}", f.schema),
+            ));
         }
         let d = f.distortion;
-        let finite = [f.fx, f.fy, f.cx, f.cy, d.k1, d.k2, d.p1, d.p2, d.k3].iter().all(|v| v.is_finite());
+        let finite = [f.fx, f.fy, f.cx, f.cy, d.k1, d.k2, d.p1, d.p2, d.k3]
+            .iter()
+            .all(|v| v.is_finite());
         if !finite || f.fx <= 0.0 || f.fy <= 0.0 || f.image_size.contains(&0) {
-            return Err(Error::invalid(path, "focal lengths must be positive and all values finite"));
+            return Err(Error::invalid(
+                path,
+                "focal lengths must be positive and all values finite",
+            ));
         }
         Ok(f)
     }

@@ -9,7 +9,11 @@ use workbench::synth::checkerboard::{self, BoardFormat, CheckerConfig};
 use workbench::synth::session::{self, Format, Layout, SessionConfig};
 
 #[derive(Parser)]
-#[command(name = "workbench", version, about = "Measure the curvature-dependent reflectance of translucent materials")]
+#[command(
+    name = "workbench",
+    version,
+    about = "Measure the curvature-dependent reflectance of translucent materials"
+)]
 struct Cli {
     /// No progress bars.
     #[arg(long, global = true)]
@@ -39,7 +43,11 @@ type Floats = Vec<f64>;
 /// Parse "a,b,c" into floats.
 fn floats(s: &str) -> Result<Floats, String> {
     s.split(',')
-        .map(|t| t.trim().parse::<f64>().map_err(|_| format!("{t:?} is not a number")))
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("{t:?} is not a number"))
+        })
         .collect()
 }
 
@@ -91,7 +99,13 @@ impl CameraArgs {
             fy: self.fy.unwrap_or(self.fx),
             cx: self.cx.unwrap_or(w as f64 * 0.5 + 3.2),
             cy: self.cy.unwrap_or(h as f64 * 0.5 - 1.5),
-            distortion: Distortion { k1: d[0], k2: d[1], p1: d[2], p2: d[3], k3: d[4] },
+            distortion: Distortion {
+                k1: d[0],
+                k2: d[1],
+                p1: d[2],
+                p2: d[3],
+                k3: d[4],
+            },
             image_size: [w, h],
         })
     }
@@ -224,12 +238,18 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
             LayoutArg::Row => Layout::Row,
         },
         camera: a.camera.camera()?,
-        light: LightAngles { azimuth: a.light_azimuth.to_radians(), elevation: a.light_elevation.to_radians() },
+        light: LightAngles {
+            azimuth: a.light_azimuth.to_radians(),
+            elevation: a.light_elevation.to_radians(),
+        },
         material: Material {
             sigma0_mm: a.sigma0,
             albedo: a.albedo,
             eta: a.eta,
-            specular: SpecularParams { ks: a.ks, alpha: a.alpha },
+            specular: SpecularParams {
+                ks: a.ks,
+                alpha: a.alpha,
+            },
         },
         material_name: a.material,
         exposure: a.exposure,
@@ -248,7 +268,8 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
         ..SessionConfig::default()
     };
     let t0 = std::time::Instant::now();
-    let out = session::generate(&cfg, &a.out, a.preview.as_deref(), quiet).with_context(|| format!("synth session into {}", a.out.display()))?;
+    let out = session::generate(&cfg, &a.out, a.preview.as_deref(), quiet)
+        .with_context(|| format!("synth session into {}", a.out.display()))?;
     println!(
         "wrote {} image(s), {} and {} in {:.2} s",
         out.images.len(),
@@ -264,7 +285,12 @@ fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
         .pattern
         .split_once(['x', 'X'])
         .and_then(|(c, r)| Some((c.parse::<u32>().ok()?, r.parse::<u32>().ok()?)))
-        .with_context(|| format!("--pattern {:?}: expected COLSxROWS inner corners, e.g. 9x6", a.pattern))?;
+        .with_context(|| {
+            format!(
+                "--pattern {:?}: expected COLSxROWS inner corners, e.g. 9x6",
+                a.pattern
+            )
+        })?;
     let format = match a.format.to_ascii_lowercase().as_str() {
         "png" => BoardFormat::Png,
         "jpg" | "jpeg" => BoardFormat::Jpeg,

@@ -27,8 +27,17 @@ pub mod idx {
 }
 /// Human-readable parameter names, in index order.
 pub const PARAM_NAMES: [&str; N_PARAMS] = [
-    "sigma0_r", "sigma0_g", "sigma0_b", "albedo_r", "albedo_g", "albedo_b", "eta", "ks", "alpha",
-    "light_azimuth", "light_elevation",
+    "sigma0_r",
+    "sigma0_g",
+    "sigma0_b",
+    "albedo_r",
+    "albedo_g",
+    "albedo_b",
+    "eta",
+    "ks",
+    "alpha",
+    "light_azimuth",
+    "light_elevation",
 ];
 
 /// Material parameters, named as in `truth.json` and `fit.json`.
@@ -72,13 +81,19 @@ impl LightAngles {
     pub fn jacobian(&self) -> (Vector3<f64>, Vector3<f64>) {
         let (sa, ca) = self.azimuth.sin_cos();
         let (se, ce) = self.elevation.sin_cos();
-        (Vector3::new(ce * ca, 0.0, ce * sa), Vector3::new(-se * sa, -ce, se * ca))
+        (
+            Vector3::new(ce * ca, 0.0, ce * sa),
+            Vector3::new(-se * sa, -ce, se * ca),
+        )
     }
 
     /// Angles of a direction (normalised first).
     pub fn from_direction(l: &Vector3<f64>) -> LightAngles {
         let l = l.normalize();
-        LightAngles { elevation: (-l.y).clamp(-1.0, 1.0).asin(), azimuth: l.x.atan2(-l.z) }
+        LightAngles {
+            elevation: (-l.y).clamp(-1.0, 1.0).asin(),
+            azimuth: l.x.atan2(-l.z),
+        }
     }
 }
 
@@ -93,8 +108,17 @@ impl Params {
     pub fn to_vec(&self) -> [f64; N_PARAMS] {
         let m = &self.material;
         [
-            m.sigma0_mm[0], m.sigma0_mm[1], m.sigma0_mm[2], m.albedo[0], m.albedo[1], m.albedo[2],
-            m.eta, m.specular.ks, m.specular.alpha, self.light.azimuth, self.light.elevation,
+            m.sigma0_mm[0],
+            m.sigma0_mm[1],
+            m.sigma0_mm[2],
+            m.albedo[0],
+            m.albedo[1],
+            m.albedo[2],
+            m.eta,
+            m.specular.ks,
+            m.specular.alpha,
+            self.light.azimuth,
+            self.light.elevation,
         ]
     }
 
@@ -104,9 +128,15 @@ impl Params {
                 sigma0_mm: [p[0], p[1], p[2]],
                 albedo: [p[3], p[4], p[5]],
                 eta: p[6],
-                specular: SpecularParams { ks: p[7], alpha: p[8] },
+                specular: SpecularParams {
+                    ks: p[7],
+                    alpha: p[8],
+                },
             },
-            light: LightAngles { azimuth: p[9], elevation: p[10] },
+            light: LightAngles {
+                azimuth: p[9],
+                elevation: p[10],
+            },
         }
     }
 }
@@ -154,9 +184,12 @@ impl Model {
         let theta = nl.acos();
         let fr = fresnel::eval(nv, m.eta);
         let t_exit = fr.transmission();
-        let spec =
-            specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
-        let (dl_da, dl_de) = if want_grad { p.light.jacobian() } else { Default::default() };
+        let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
+        let (dl_da, dl_de) = if want_grad {
+            p.light.jacobian()
+        } else {
+            Default::default()
+        };
         for c in 0..3 {
             let sigma = m.sigma0_mm[c] / g.radius_mm;
             let f = cdrf::eval(theta, sigma, self.convolution);

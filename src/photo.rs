@@ -76,15 +76,46 @@ impl ExifInfo {
     pub fn to_tiff(&self) -> Result<Vec<u8>> {
         // Rationals with a fixed denominator (ExposureTime keeps a power-of-ten denominator so that
         // 1/30 s survives with 9 significant digits).
-        let rational = |v: f64, denom: u32| Rational { num: (v * denom as f64).round() as u32, denom };
+        let rational = |v: f64, denom: u32| Rational {
+            num: (v * denom as f64).round() as u32,
+            denom,
+        };
         let fields = [
-            Field { tag: Tag::Make, ifd_num: In::PRIMARY, value: Value::Ascii(vec![self.make.clone().into_bytes()]) },
-            Field { tag: Tag::Model, ifd_num: In::PRIMARY, value: Value::Ascii(vec![self.model.clone().into_bytes()]) },
-            Field { tag: Tag::ExposureTime, ifd_num: In::PRIMARY, value: Value::Rational(vec![rational(self.exposure_time_s, 1_000_000_000)]) },
-            Field { tag: Tag::FNumber, ifd_num: In::PRIMARY, value: Value::Rational(vec![rational(self.f_number, 1000)]) },
-            Field { tag: Tag::PhotographicSensitivity, ifd_num: In::PRIMARY, value: Value::Short(vec![self.iso.min(65535) as u16]) },
-            Field { tag: Tag::FocalLength, ifd_num: In::PRIMARY, value: Value::Rational(vec![rational(self.focal_length_mm, 1000)]) },
-            Field { tag: Tag::FocalLengthIn35mmFilm, ifd_num: In::PRIMARY, value: Value::Short(vec![self.focal_length_35mm.unwrap_or(0).min(65535) as u16]) },
+            Field {
+                tag: Tag::Make,
+                ifd_num: In::PRIMARY,
+                value: Value::Ascii(vec![self.make.clone().into_bytes()]),
+            },
+            Field {
+                tag: Tag::Model,
+                ifd_num: In::PRIMARY,
+                value: Value::Ascii(vec![self.model.clone().into_bytes()]),
+            },
+            Field {
+                tag: Tag::ExposureTime,
+                ifd_num: In::PRIMARY,
+                value: Value::Rational(vec![rational(self.exposure_time_s, 1_000_000_000)]),
+            },
+            Field {
+                tag: Tag::FNumber,
+                ifd_num: In::PRIMARY,
+                value: Value::Rational(vec![rational(self.f_number, 1000)]),
+            },
+            Field {
+                tag: Tag::PhotographicSensitivity,
+                ifd_num: In::PRIMARY,
+                value: Value::Short(vec![self.iso.min(65535) as u16]),
+            },
+            Field {
+                tag: Tag::FocalLength,
+                ifd_num: In::PRIMARY,
+                value: Value::Rational(vec![rational(self.focal_length_mm, 1000)]),
+            },
+            Field {
+                tag: Tag::FocalLengthIn35mmFilm,
+                ifd_num: In::PRIMARY,
+                value: Value::Short(vec![self.focal_length_35mm.unwrap_or(0).min(65535) as u16]),
+            },
         ];
         let mut w = Writer::new();
         for f in &fields {
@@ -107,9 +138,10 @@ impl ExifInfo {
         };
         let get = |tag| ex.get_field(tag, In::PRIMARY);
         let ascii = |tag| match get(tag).map(|f| &f.value) {
-            Some(Value::Ascii(v)) if !v.is_empty() => {
-                String::from_utf8_lossy(&v[0]).trim_end_matches('\0').trim().to_string()
-            }
+            Some(Value::Ascii(v)) if !v.is_empty() => String::from_utf8_lossy(&v[0])
+                .trim_end_matches('\0')
+                .trim()
+                .to_string(),
             _ => String::new(),
         };
         let rational = |tag| match get(tag).map(|f| &f.value) {
@@ -117,9 +149,11 @@ impl ExifInfo {
             _ => None,
         };
         let uint = |tag| get(tag).and_then(|f| f.value.get_uint(0));
-        let (Some(t), Some(n), Some(iso)) =
-            (rational(Tag::ExposureTime), rational(Tag::FNumber), uint(Tag::PhotographicSensitivity))
-        else {
+        let (Some(t), Some(n), Some(iso)) = (
+            rational(Tag::ExposureTime),
+            rational(Tag::FNumber),
+            uint(Tag::PhotographicSensitivity),
+        ) else {
             return Ok(None);
         };
         Ok(Some(ExifInfo {
@@ -135,7 +169,10 @@ impl ExifInfo {
 }
 
 fn image_err(path: &Path, e: image::ImageError) -> Error {
-    Error::Image { path: path.to_path_buf(), source: e }
+    Error::Image {
+        path: path.to_path_buf(),
+        source: e,
+    }
 }
 
 /// Write interleaved RGB 16-bit samples as a PNG.
@@ -164,8 +201,16 @@ pub fn write_8bit(
     quality: u8,
     exif: Option<&ExifInfo>,
 ) -> Result<()> {
-    let color = if channels == 1 { ExtendedColorType::L8 } else { ExtendedColorType::Rgb8 };
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let color = if channels == 1 {
+        ExtendedColorType::L8
+    } else {
+        ExtendedColorType::Rgb8
+    };
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     let tiff = exif.map(|e| e.to_tiff()).transpose()?;
     let mut err = None;
     write_atomic(path, |w| {

@@ -55,7 +55,11 @@ fn is_shared(m: &LightMode) -> bool {
 impl Session {
     /// Read and validate a session file (a folder means its `session.json`).
     pub fn load(path: &Path) -> Result<(Session, PathBuf)> {
-        let file = if path.is_dir() { path.join("session.json") } else { path.to_path_buf() };
+        let file = if path.is_dir() {
+            path.join("session.json")
+        } else {
+            path.to_path_buf()
+        };
         let s: Session = read_json(&file)?;
         s.validate(&file)?;
         Ok((s, file))
@@ -86,7 +90,10 @@ impl Session {
             }
             if let Some(e) = im.exposure {
                 if !(e.is_finite() && e > 0.0) {
-                    return bad(format!("images[{i}] ({}): exposure must be positive, got {e}", im.file));
+                    return bad(format!(
+                        "images[{i}] ({}): exposure must be positive, got {e}",
+                        im.file
+                    ));
                 }
             }
         }

@@ -69,10 +69,16 @@ pub fn lobe(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> LobeEva
     let value = ks * base;
     let d_nl = ks * k * gv * f.reflectance * (dd_nh * dnh_dnl * gl + d * dgl_c);
     let d_lv = ks * k * gl * gv * (dd_nh * dnh_dlv * f.reflectance + d * f.d_cos * dlh_dlv);
-    let d_alpha =
-        ks * k * f.reflectance * (dd_a * gl * gv + d * dgl_a * gv + d * gl * dgv_a);
+    let d_alpha = ks * k * f.reflectance * (dd_a * gl * gv + d * dgl_a * gv + d * gl * dgv_a);
     let d_eta = ks * k * d * gl * gv * f.d_eta;
-    LobeEval { value, d_nl, d_lv, d_ks: base, d_alpha, d_eta }
+    LobeEval {
+        value,
+        d_nl,
+        d_lv,
+        d_ks: base,
+        d_alpha,
+        d_eta,
+    }
 }
 
 #[cfg(test)]

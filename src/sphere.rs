@@ -60,8 +60,11 @@ impl Ellipse {
         }
         let s = a / -fc;
         let eig = SymmetricEigen::new(s);
-        let (i_min, i_max) =
-            if eig.eigenvalues[0] <= eig.eigenvalues[1] { (0, 1) } else { (1, 0) };
+        let (i_min, i_max) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
+            (0, 1)
+        } else {
+            (1, 0)
+        };
         let (l_min, l_max) = (eig.eigenvalues[i_min], eig.eigenvalues[i_max]);
         if l_min <= 0.0 {
             return None; // not an ellipse (the sphere crosses the camera plane)
@@ -73,7 +76,11 @@ impl Ellipse {
         } else if angle > std::f64::consts::FRAC_PI_2 {
             angle -= std::f64::consts::PI;
         }
-        Some(Ellipse { center, semi_axes: [1.0 / l_min.sqrt(), 1.0 / l_max.sqrt()], angle })
+        Some(Ellipse {
+            center,
+            semi_axes: [1.0 / l_min.sqrt(), 1.0 / l_max.sqrt()],
+            angle,
+        })
     }
 }
 
@@ -116,7 +123,10 @@ impl Sphere {
 
     /// The silhouette conic in (undistorted, ideal pinhole) pixel coordinates: K⁻ᵀ Q K⁻¹.
     pub fn image_conic(&self, cam: &Camera) -> Matrix3<f64> {
-        let kinv = cam.k().try_inverse().expect("camera matrix with fx, fy ≠ 0");
+        let kinv = cam
+            .k()
+            .try_inverse()
+            .expect("camera matrix with fx, fy ≠ 0");
         kinv.transpose() * self.normalized_conic() * kinv
     }
 
@@ -144,7 +154,12 @@ impl Sphere {
         let t = self.intersect(d)?;
         let point = d * t;
         let normal = (point - self.center) / self.radius;
-        Some(SurfacePoint { point, normal: normal.normalize(), view: -d, t })
+        Some(SurfacePoint {
+            point,
+            normal: normal.normalize(),
+            view: -d,
+            t,
+        })
     }
 
     /// Angular distance of a unit ray from the silhouette (positive outside), radians.

@@ -20,25 +20,36 @@ fn line_quadrature(x: f64, s: f64) -> f64 {
     }
     cuts.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let f = |u: f64| u.cos() * gauss(x - u, s);
-    cuts.windows(2).map(|w| integrate(&f, w[0], w[1], 1e-14)).sum()
+    cuts.windows(2)
+        .map(|w| integrate(&f, w[0], w[1], 1e-14))
+        .sum()
 }
 
 /// The wrapped form as a sum of line integrals over the periodic images of the Gaussian.
 fn wrapped_quadrature(x: f64, s: f64) -> f64 {
     let k_max = (12.0 * s / (2.0 * PI)).ceil() as i64 + 1;
-    (-k_max..=k_max).map(|k| line_quadrature(x + 2.0 * PI * k as f64, s)).sum()
+    (-k_max..=k_max)
+        .map(|k| line_quadrature(x + 2.0 * PI * k as f64, s))
+        .sum()
 }
 
 fn sigmas() -> Vec<f64> {
     // 1e-4 .. 3 rad, log-spaced, plus the switch points of the wrapped evaluation.
-    let mut v: Vec<f64> = (0..=24).map(|i| 1e-4 * (3e4f64).powf(i as f64 / 24.0)).collect();
+    let mut v: Vec<f64> = (0..=24)
+        .map(|i| 1e-4 * (3e4f64).powf(i as f64 / 24.0))
+        .collect();
     v.extend([0.169_999, 0.17, 0.849_999, 0.85]);
     v
 }
 
 fn thetas() -> Vec<f64> {
     let mut v: Vec<f64> = (0..=40).map(|i| PI * i as f64 / 40.0).collect();
-    v.extend([FRAC_PI_2 - 1e-3, FRAC_PI_2 + 1e-3, FRAC_PI_2 - 1e-5, PI - 1e-9]);
+    v.extend([
+        FRAC_PI_2 - 1e-3,
+        FRAC_PI_2 + 1e-3,
+        FRAC_PI_2 - 1e-5,
+        PI - 1e-9,
+    ]);
     v
 }
 
@@ -58,7 +69,10 @@ fn closed_form_matches_quadrature_within_1e_10() {
             }
         }
     }
-    println!("worst |closed form − quadrature| = {:.2e} at σ={}, θ={} ({})", worst.0, worst.1, worst.2, worst.3);
+    println!(
+        "worst |closed form − quadrature| = {:.2e} at σ={}, θ={} ({})",
+        worst.0, worst.1, worst.2, worst.3
+    );
     assert!(worst.0 <= 1e-10, "{worst:?}");
 }
 
@@ -67,14 +81,23 @@ fn zero_width_limit_is_the_clamped_cosine() {
     for &t in &thetas() {
         for conv in [Convolution::Line, Convolution::Wrapped] {
             // |f − max(cos, 0)| ≤ σ/√(2π) at the terminator and far less elsewhere.
-            assert!((value(t, 1e-9, conv) - t.cos().max(0.0)).abs() < 1e-9, "θ={t}");
-            assert!((value(t, 0.0, conv) - t.cos().max(0.0)).abs() < 1e-15, "θ={t}");
+            assert!(
+                (value(t, 1e-9, conv) - t.cos().max(0.0)).abs() < 1e-9,
+                "θ={t}"
+            );
+            assert!(
+                (value(t, 0.0, conv) - t.cos().max(0.0)).abs() < 1e-15,
+                "θ={t}"
+            );
         }
     }
     // The θ-derivative jumps at π/2: −1 just before, 0 just after.
     let before = eval(FRAC_PI_2 - 1e-3, 1e-7, Convolution::Wrapped).d_theta;
     let after = eval(FRAC_PI_2 + 1e-3, 1e-7, Convolution::Wrapped).d_theta;
-    assert!((before + 1.0).abs() < 1e-5 && after.abs() < 1e-12, "{before} {after}");
+    assert!(
+        (before + 1.0).abs() < 1e-5 && after.abs() < 1e-12,
+        "{before} {after}"
+    );
 }
 
 #[test]
@@ -117,14 +140,34 @@ fn derivatives_match_finite_differences() {
                 let fd_t = derivative(&|x| eval(x, s, conv).value, t, h);
                 let fd_s = derivative(&|x| eval(t, x, conv).value, s, h);
                 let fd_tt = derivative(&|x| eval(x, s, conv).d_theta, t, h);
-                assert!(close(e.d_theta, fd_t, 1e-6, 1e-11), "∂θ σ={s} θ={t} {conv:?}: {} vs {fd_t}", e.d_theta);
-                assert!(close(e.d_sigma, fd_s, 1e-6, 1e-11), "∂σ σ={s} θ={t} {conv:?}: {} vs {fd_s}", e.d_sigma);
-                assert!(close(e.d2_theta, fd_tt, 1e-6, 1e-9), "∂²θ σ={s} θ={t} {conv:?}: {} vs {fd_tt}", e.d2_theta);
+                assert!(
+                    close(e.d_theta, fd_t, 1e-6, 1e-11),
+                    "∂θ σ={s} θ={t} {conv:?}: {} vs {fd_t}",
+                    e.d_theta
+                );
+                assert!(
+                    close(e.d_sigma, fd_s, 1e-6, 1e-11),
+                    "∂σ σ={s} θ={t} {conv:?}: {} vs {fd_s}",
+                    e.d_sigma
+                );
+                assert!(
+                    close(e.d2_theta, fd_tt, 1e-6, 1e-9),
+                    "∂²θ σ={s} θ={t} {conv:?}: {} vs {fd_tt}",
+                    e.d2_theta
+                );
                 // ∂f/∂cosθ, including the θ → 0 and θ → π limits.
                 let c = t.cos();
                 if c.abs() < 0.999 {
-                    let fd_c = derivative(&|x: f64| eval(x.clamp(-1.0, 1.0).acos(), s, conv).value, c, 1e-5);
-                    assert!(close(e.d_cos(t), fd_c, 1e-6, 1e-10), "∂cos σ={s} θ={t}: {} vs {fd_c}", e.d_cos(t));
+                    let fd_c = derivative(
+                        &|x: f64| eval(x.clamp(-1.0, 1.0).acos(), s, conv).value,
+                        c,
+                        1e-5,
+                    );
+                    assert!(
+                        close(e.d_cos(t), fd_c, 1e-6, 1e-10),
+                        "∂cos σ={s} θ={t}: {} vs {fd_c}",
+                        e.d_cos(t)
+                    );
                 }
                 checked += 1;
             }
@@ -133,10 +176,14 @@ fn derivatives_match_finite_differences() {
     // The limits of ∂f/∂cosθ at the poles, against a one-sided difference in cos θ.
     for &s in &[0.1, 0.5, 2.0] {
         let at0 = eval(0.0, s, Convolution::Wrapped).d_cos(0.0);
-        let fd0 = (value(0.0, s, Convolution::Wrapped) - value((1.0f64 - 1e-8).acos(), s, Convolution::Wrapped)) / 1e-8;
+        let fd0 = (value(0.0, s, Convolution::Wrapped)
+            - value((1.0f64 - 1e-8).acos(), s, Convolution::Wrapped))
+            / 1e-8;
         assert!(close(at0, fd0, 1e-5, 1e-9), "{at0} {fd0}");
         let atpi = eval(PI, s, Convolution::Wrapped).d_cos(PI);
-        let fdpi = (value((-1.0f64 + 1e-8).acos(), s, Convolution::Wrapped) - value(PI, s, Convolution::Wrapped)) / 1e-8;
+        let fdpi = (value((-1.0f64 + 1e-8).acos(), s, Convolution::Wrapped)
+            - value(PI, s, Convolution::Wrapped))
+            / 1e-8;
         assert!(close(atpi, fdpi, 1e-5, 1e-9), "{atpi} {fdpi}");
     }
     assert_eq!(checked, 128);

@@ -118,7 +118,12 @@ impl CheckerConfig {
         let (x0, y0) = (-s - m, -s - m);
         let x1 = self.inner[0] as f64 * s + m;
         let y1 = self.inner[1] as f64 * s + m;
-        [Vector3::new(x0, y0, 0.0), Vector3::new(x1, y0, 0.0), Vector3::new(x1, y1, 0.0), Vector3::new(x0, y1, 0.0)]
+        [
+            Vector3::new(x0, y0, 0.0),
+            Vector3::new(x1, y0, 0.0),
+            Vector3::new(x1, y1, 0.0),
+            Vector3::new(x0, y1, 0.0),
+        ]
     }
 
     /// Colour of a board-frame point, `None` off the board.
@@ -170,41 +175,76 @@ pub fn poses(cfg: &CheckerConfig) -> Result<Vec<Pose>> {
     let (sw, sh) = cfg.squares_extent();
     let centre_b = Vector3::new(0.5 * sw - cfg.square_mm, 0.5 * sh - cfg.square_mm, 0.0);
     let board_w = sw + 2.0 * cfg.margin_mm;
-    let grid = [(0.5, 0.5), (0.22, 0.25), (0.78, 0.25), (0.22, 0.75), (0.78, 0.75), (0.5, 0.22), (0.5, 0.78), (0.2, 0.5), (0.8, 0.5)];
+    // Aim at the frame's edges and corners; a pose that does not fit is pulled toward the centre
+    // just far enough, so the board ends up touching the edge it was aimed at.
+    let grid = [
+        (0.5, 0.5),
+        (0.05, 0.05),
+        (0.95, 0.05),
+        (0.05, 0.95),
+        (0.95, 0.95),
+        (0.5, 0.05),
+        (0.5, 0.95),
+        (0.05, 0.5),
+        (0.95, 0.5),
+    ];
     let mut out = Vec::new();
     for k in 0..cfg.views as usize {
         let (gx, gy) = grid[k % grid.len()];
         let sign = |b: bool| if b { 1.0 } else { -1.0 };
         let tilt = |rng: &mut ChaCha8Rng| rng.random_range(15f64..45f64).to_radians();
         let (pitch, yaw) = match k % 3 {
-            0 => (sign(k % 2 == 0) * tilt(&mut rng), rng.random_range(-10f64..10f64).to_radians()),
-            1 => (rng.random_range(-10f64..10f64).to_radians(), sign(k % 4 < 2) * tilt(&mut rng)),
-            _ => (sign(k % 2 == 1) * tilt(&mut rng) * 0.8, sign(k % 4 >= 2) * tilt(&mut rng) * 0.8),
+            0 => (
+                sign(k % 2 == 0) * tilt(&mut rng),
+                rng.random_range(-10f64..10f64).to_radians(),
+            ),
+            1 => (
+                rng.random_range(-10f64..10f64).to_radians(),
+                sign(k % 4 < 2) * tilt(&mut rng),
+            ),
+            _ => (
+                sign(k % 2 == 1) * tilt(&mut rng) * 0.8,
+                sign(k % 4 >= 2) * tilt(&mut rng) * 0.8,
+            ),
         };
         let roll = rng.random_range(-20f64..20f64).to_radians();
         let rotation = Rotation3::from_euler_angles(pitch, yaw, roll);
-        let frac = rng.random_range(0.45..0.65);
+        // Views aimed at the centre fill more of the frame; those aimed at edges are smaller, so
+        // their corners get close to the frame's edges.
+        let frac = if k % grid.len() == 0 {
+            rng.random_range(0.6..0.75)
+        } else {
+            rng.random_range(0.35..0.5)
+        };
         let mut z = cam.fx * board_w / (frac * w);
-        let mut target = Vector2::new(gx * w, gy * h) + Vector2::new(rng.random_range(-20.0..20.0), rng.random_range(-20.0..20.0));
+        let mut target = Vector2::new(gx * w, gy * h)
+            + Vector2::new(rng.random_range(-20.0..20.0), rng.random_range(-20.0..20.0));
         let mut found = None;
         'search: for _ in 0..20 {
-            for _ in 0..10 {
+            for _ in 0..25 {
                 let n = cam.undistort_pixel(target).unwrap_or(Vector2::zeros());
                 let translation = Vector3::new(n.x * z, n.y * z, z) - rotation * centre_b;
                 let inside = cfg.outline().iter().all(|p| {
                     let pc = rotation * p + translation;
                     pc.z > 1.0
-                        && cam.project(&pc).is_some_and(|q| q.x > 8.0 && q.y > 8.0 && q.x < w - 8.0 && q.y < h - 8.0)
+                        && cam.project(&pc).is_some_and(|q| {
+                            q.x > 8.0 && q.y > 8.0 && q.x < w - 8.0 && q.y < h - 8.0
+                        })
                 });
                 if inside {
-                    found = Some(Pose { rotation, translation });
+                    found = Some(Pose {
+                        rotation,
+                        translation,
+                    });
                     break 'search;
                 }
-                target += (Vector2::new(0.5 * w, 0.5 * h) - target) * 0.15;
+                target += (Vector2::new(0.5 * w, 0.5 * h) - target) * 0.08;
             }
             z *= 1.1;
         }
-        out.push(found.ok_or_else(|| Error::Argument(format!("cannot place view {} inside the frame", k + 1)))?);
+        out.push(found.ok_or_else(|| {
+            Error::Argument(format!("cannot place view {} inside the frame", k + 1))
+        })?);
     }
     Ok(out)
 }
@@ -228,8 +268,10 @@ fn render_view(cfg: &CheckerConfig, pose: &Pose, rays: &[Option<Vector3<f64>>]) 
         let b = rinv * (d * s - pose.translation);
         cfg.colour(b.x, b.y).unwrap_or(BACKGROUND)
     };
-    let mut img: Vec<f64> =
-        rays.par_iter().map(|r| r.as_ref().map_or(BACKGROUND, &value)).collect();
+    let mut img: Vec<f64> = rays
+        .par_iter()
+        .map(|r| r.as_ref().map_or(BACKGROUND, &value))
+        .collect();
     let n = cfg.supersample as usize;
     if n > 1 {
         let base = img.clone();
@@ -301,7 +343,8 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
                 row.iter()
                     .enumerate()
                     .map(|(x, v)| {
-                        let rho = Vector2::new(x as f64 - cam.cx, y as f64 - cam.cy).norm() / rho_max;
+                        let rho =
+                            Vector2::new(x as f64 - cam.cx, y as f64 - cam.cy).norm() / rho_max;
                         let vig = 1.0 - cfg.vignetting * rho * rho;
                         let s = super::sensor(v * vig, cfg.noise, cfg.read_noise, &mut rng);
                         (photo::srgb_encode(s) * 255.0).round() as u8
@@ -316,13 +359,20 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
         for j in 0..cfg.inner[1] {
             for i in 0..cfg.inner[0] {
                 let p = Vector3::new(i as f64 * cfg.square_mm, j as f64 * cfg.square_mm, 0.0);
-                let q = cam.project(&(pose.rotation * p + pose.translation)).expect("board in front of the camera");
+                let q = cam
+                    .project(&(pose.rotation * p + pose.translation))
+                    .expect("board in front of the camera");
                 corners.push([q.x, q.y]);
             }
         }
         let rv = pose.rotation.scaled_axis();
         let t = pose.translation;
-        views.push(ViewTruth { file, rvec: [rv.x, rv.y, rv.z], tvec: [t.x, t.y, t.z], corners_px: corners });
+        views.push(ViewTruth {
+            file,
+            rvec: [rv.x, rv.y, rv.z],
+            tvec: [t.x, t.y, t.z],
+            corners_px: corners,
+        });
         images.push(path);
         pb.inc(1);
     }
@@ -343,5 +393,9 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
     };
     let truth_file = out.join("truth.json");
     write_json(&truth_file, &truth)?;
-    Ok(CheckerOutput { truth_file, images, truth })
+    Ok(CheckerOutput {
+        truth_file,
+        images,
+        truth,
+    })
 }

@@ -36,7 +36,9 @@ pub(crate) fn gaussian_blur(img: &mut [f64], width: usize, height: usize, sigma:
         return;
     }
     let r = (3.0 * sigma).ceil() as isize;
-    let mut k: Vec<f64> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
+    let mut k: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
     let s: f64 = k.iter().sum();
     k.iter_mut().for_each(|v| *v /= s);
     let mut tmp = vec![0.0; img.len()];

@@ -79,7 +79,13 @@ pub fn default_camera() -> Camera {
         fy: 1400.0,
         cx: 643.2,
         cy: 478.5,
-        distortion: crate::camera::Distortion { k1: -0.12, k2: 0.08, p1: 4e-4, p2: -3e-4, k3: 0.0 },
+        distortion: crate::camera::Distortion {
+            k1: -0.12,
+            k2: 0.08,
+            p1: 4e-4,
+            p2: -3e-4,
+            k3: 0.0,
+        },
         image_size: [1280, 960],
     }
 }
@@ -90,12 +96,18 @@ impl Default for SessionConfig {
             radii_mm: vec![35.0, 30.0, 25.0, 20.0, 15.0],
             layout: Layout::Separate,
             camera: default_camera(),
-            light: LightAngles { azimuth: 70f64.to_radians(), elevation: 20f64.to_radians() },
+            light: LightAngles {
+                azimuth: 70f64.to_radians(),
+                elevation: 20f64.to_radians(),
+            },
             material: Material {
                 sigma0_mm: [4.0, 3.0, 2.2],
                 albedo: [0.80, 0.62, 0.45],
                 eta: 1.44,
-                specular: SpecularParams { ks: 1.0, alpha: 0.1 },
+                specular: SpecularParams {
+                    ks: 1.0,
+                    alpha: 0.1,
+                },
             },
             material_name: "synthetic wax".into(),
             convolution: Convolution::Wrapped,
@@ -175,7 +187,11 @@ fn check(cfg: &SessionConfig) -> Result<()> {
         return arg(format!("radius {r} mm is not positive"));
     }
     let m = &cfg.material;
-    let all_pos = m.sigma0_mm.iter().chain(&m.albedo).all(|v| v.is_finite() && *v >= 0.0);
+    let all_pos = m
+        .sigma0_mm
+        .iter()
+        .chain(&m.albedo)
+        .all(|v| v.is_finite() && *v >= 0.0);
     if !all_pos || !(m.eta >= 1.0) || !(m.specular.ks >= 0.0) || !(m.specular.alpha > 0.0) {
         return arg("material: σ0 and albedo must be ≥ 0, η ≥ 1, ks ≥ 0 and α > 0".into());
     }
@@ -197,7 +213,9 @@ fn check(cfg: &SessionConfig) -> Result<()> {
 fn fits_in_frame(cam: &Camera, spheres: &[(f64, Sphere)], margin: f64) -> bool {
     let (w, h) = (cam.width() as f64, cam.height() as f64);
     spheres.iter().all(|(_, s)| {
-        let Some(half) = s.cone_half_angle() else { return false };
+        let Some(half) = s.cone_half_angle() else {
+            return false;
+        };
         let axis = s.center.normalize();
         let e1 = axis.cross(&Vector3::y()).normalize();
         let e2 = axis.cross(&e1);
@@ -221,16 +239,24 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
     let r_max = cfg.radii_mm.iter().cloned().fold(0.0, f64::max);
     let r_min = cfg.radii_mm.iter().cloned().fold(f64::INFINITY, f64::min);
     let gap = 0.5 * r_min;
-    let row_width: f64 = cfg.radii_mm.iter().map(|r| 2.0 * r).sum::<f64>()
-        + gap * (cfg.radii_mm.len() as f64 - 1.0);
+    let row_width: f64 =
+        cfg.radii_mm.iter().map(|r| 2.0 * r).sum::<f64>() + gap * (cfg.radii_mm.len() as f64 - 1.0);
     let mut z = cfg.distance_mm.unwrap_or(match cfg.layout {
         Layout::Separate => r_max * cam.fy / (0.17 * cam.height() as f64),
         Layout::Row => row_width * cam.fx / (0.85 * cam.width() as f64),
     });
     let name = |r: f64, i: usize| {
         let dup = cfg.radii_mm.iter().filter(|&&q| q == r).count() > 1;
-        let base = if r.fract() == 0.0 { format!("r{r:.0}") } else { format!("r{r}") };
-        if dup { format!("{base}-{}", i + 1) } else { base }
+        let base = if r.fract() == 0.0 {
+            format!("r{r:.0}")
+        } else {
+            format!("r{r}")
+        };
+        if dup {
+            format!("{base}-{}", i + 1)
+        } else {
+            base
+        }
     };
     let ext = match cfg.format {
         Format::Png16 => "png",
@@ -258,7 +284,10 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
                         (r, s)
                     })
                     .collect();
-                vec![ScenePlan { file: format!("row.{ext}"), spheres }]
+                vec![ScenePlan {
+                    file: format!("row.{ext}"),
+                    spheres,
+                }]
             }
         };
         let all_fit = plans.iter().all(|p| fits_in_frame(cam, &p.spheres, 6.0));
@@ -274,12 +303,20 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
         }
         z *= 1.05;
     }
-    Err(Error::Argument("cannot frame the spheres: check the camera".into()))
+    Err(Error::Argument(
+        "cannot frame the spheres: check the camera".into(),
+    ))
 }
 
 /// Linear radiance-times-exposure (plus ambient) along one ray: the nearest sphere hit, or the
 /// ambient floor.
-fn shade(cfg: &SessionConfig, model: &Model, params: &Params, spheres: &[(f64, Sphere)], d: &Vector3<f64>) -> [f64; 3] {
+fn shade(
+    cfg: &SessionConfig,
+    model: &Model,
+    params: &Params,
+    spheres: &[(f64, Sphere)],
+    d: &Vector3<f64>,
+) -> [f64; 3] {
     let mut best: Option<(f64, usize)> = None;
     for (i, (_, s)) in spheres.iter().enumerate() {
         if let Some(t) = s.intersect(d) {
@@ -288,10 +325,18 @@ fn shade(cfg: &SessionConfig, model: &Model, params: &Params, spheres: &[(f64, S
             }
         }
     }
-    let Some((_, i)) = best else { return [cfg.ambient; 3] };
+    let Some((_, i)) = best else {
+        return [cfg.ambient; 3];
+    };
     let (r, s) = &spheres[i];
-    let Some(sp) = s.surface_at(d) else { return [cfg.ambient; 3] };
-    let g = Geometry { normal: sp.normal, view: sp.view, radius_mm: *r };
+    let Some(sp) = s.surface_at(d) else {
+        return [cfg.ambient; 3];
+    };
+    let g = Geometry {
+        normal: sp.normal,
+        view: sp.view,
+        radius_mm: *r,
+    };
     let l = model.radiance(params, &g);
     [0, 1, 2].map(|c| cfg.exposure * l[c] + cfg.ambient)
 }
@@ -300,8 +345,13 @@ fn shade(cfg: &SessionConfig, model: &Model, params: &Params, spheres: &[(f64, S
 pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64> {
     let cam = &cfg.camera;
     let (w, h) = (cam.width() as usize, cam.height() as usize);
-    let model = Model { convolution: cfg.convolution };
-    let params = Params { material: cfg.material, light: cfg.light };
+    let model = Model {
+        convolution: cfg.convolution,
+    };
+    let params = Params {
+        material: cfg.material,
+        light: cfg.light,
+    };
     // A pixel is an edge pixel when its centre ray is within this angle of a silhouette.
     let margin = 2.5 * cam.pixel_angle();
     let n = cfg.supersample as usize;
@@ -314,13 +364,18 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
                 continue;
             };
             let near_edge = n > 1
-                && spheres.iter().any(|(_, s)| s.angle_outside(&d).is_some_and(|a| a.abs() < margin));
+                && spheres
+                    .iter()
+                    .any(|(_, s)| s.angle_outside(&d).is_some_and(|a| a.abs() < margin));
             let v = if near_edge {
                 let mut acc = [0.0; 3];
                 for j in 0..n {
                     for i in 0..n {
                         let sub = px
-                            + Vector2::new((i as f64 + 0.5) / n as f64 - 0.5, (j as f64 + 0.5) / n as f64 - 0.5);
+                            + Vector2::new(
+                                (i as f64 + 0.5) / n as f64 - 0.5,
+                                (j as f64 + 0.5) / n as f64 - 0.5,
+                            );
                         let v = match cam.ray_for_pixel(sub) {
                             Some(ds) => shade(cfg, &model, &params, spheres, &ds),
                             None => [cfg.ambient; 3],
@@ -350,7 +405,12 @@ pub struct SessionOutput {
 /// Render the session into `out` (created if needed): the images, `session.json`, `truth.json`,
 /// and `intrinsics.json` when no intrinsics reference is given. `preview`: also write the first
 /// image as an 8-bit sRGB PNG there (for looking at, not for measuring).
-pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: bool) -> Result<SessionOutput> {
+pub fn generate(
+    cfg: &SessionConfig,
+    out: &Path,
+    preview: Option<&Path>,
+    quiet: bool,
+) -> Result<SessionOutput> {
     let plans = plan(cfg)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let cam = &cfg.camera;
@@ -376,7 +436,10 @@ pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: 
             v
         };
         if let (0, Some(pv)) = (k, preview) {
-            let q: Vec<u8> = noisy.iter().map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8).collect();
+            let q: Vec<u8> = noisy
+                .iter()
+                .map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8)
+                .collect();
             photo::write_8bit(pv, w as u32, h as u32, 3, &q, 0, None)?;
         }
         match cfg.format {
@@ -385,8 +448,19 @@ pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: 
                 photo::write_png16_rgb(&path, w as u32, h as u32, &q)?;
             }
             Format::Jpeg => {
-                let q: Vec<u8> = noisy.iter().map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8).collect();
-                photo::write_8bit(&path, w as u32, h as u32, 3, &q, cfg.jpeg_quality, Some(&exif))?;
+                let q: Vec<u8> = noisy
+                    .iter()
+                    .map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8)
+                    .collect();
+                photo::write_8bit(
+                    &path,
+                    w as u32,
+                    h as u32,
+                    3,
+                    &q,
+                    cfg.jpeg_quality,
+                    Some(&exif),
+                )?;
             }
         }
         images.push(path);
@@ -399,13 +473,20 @@ pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: 
                 .map(|(r, s)| TruthSphere {
                     radius_mm: *r,
                     center_mm: [s.center.x, s.center.y, s.center.z],
-                    ellipse: s.image_ellipse(cam).expect("sphere in front of the camera").into(),
+                    ellipse: s
+                        .image_ellipse(cam)
+                        .expect("sphere in front of the camera")
+                        .into(),
                 })
                 .collect(),
         });
         session_images.push(SessionImage {
             file: p.file.clone(),
-            spheres: p.spheres.iter().map(|(r, _)| SessionSphere { radius_mm: *r }).collect(),
+            spheres: p
+                .spheres
+                .iter()
+                .map(|(r, _)| SessionSphere { radius_mm: *r })
+                .collect(),
             exposure: (cfg.format == Format::Png16).then_some(cfg.exposure),
             linear: None,
         });
@@ -416,7 +497,10 @@ pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: 
     let intrinsics_ref = match &cfg.intrinsics_ref {
         Some(r) => r.clone(),
         None => {
-            crate::output::write_json(&out.join("intrinsics.json"), &IntrinsicsFile::from_truth(cam))?;
+            crate::output::write_json(
+                &out.join("intrinsics.json"),
+                &IntrinsicsFile::from_truth(cam),
+            )?;
             "intrinsics.json".into()
         }
     };
@@ -456,5 +540,10 @@ pub fn generate(cfg: &SessionConfig, out: &Path, preview: Option<&Path>, quiet: 
     let truth_file = out.join("truth.json");
     write_json(&session_file, &session)?;
     write_json(&truth_file, &truth)?;
-    Ok(SessionOutput { session_file, truth_file, images, truth })
+    Ok(SessionOutput {
+        session_file,
+        truth_file,
+        images,
+        truth,
+    })
 }
