@@ -1,23 +1,24 @@
-//! Typed library errors. Every variant that concerns a file names it.
+//! Typed library errors. Every variant that concerns a file names it, and its message already
+//! includes the underlying cause (so it prints as one line, with no separate source chain).
 
 use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {err}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        err: std::io::Error,
     },
-    #[error("{}: invalid JSON: {source}", path.display())]
+    #[error("{}: invalid JSON: {err}", path.display())]
     Json {
         path: PathBuf,
-        source: serde_json::Error,
+        err: serde_json::Error,
     },
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {err}", path.display())]
     Image {
         path: PathBuf,
-        source: image::ImageError,
+        err: image::ImageError,
     },
     #[error("{}: {msg}", path.display())]
     Invalid { path: PathBuf, msg: String },
@@ -31,7 +32,7 @@ impl Error {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
-            source,
+            err: source,
         }
     }
 

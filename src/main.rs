@@ -27,6 +27,11 @@ enum Command {
     /// Render ground-truth synthetic data.
     #[command(subcommand)]
     Synth(Synth),
+    /// Check a session folder against its files: images, sizes, intrinsics, exposures.
+    Check {
+        /// The session folder (or its session.json).
+        session: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -323,11 +328,54 @@ fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+fn check(session: PathBuf) -> Result<()> {
+    let r = workbench::session::inspect(&session)?;
+    println!("session  {}", r.session_file.display());
+    if let Some(m) = &r.material {
+        println!("material {m}");
+    }
+    match (&r.intrinsics_file, &r.camera) {
+        (Some(f), Some(c)) => println!(
+            "camera   {} — {}×{}, fx {:.1} fy {:.1} cx {:.1} cy {:.1}, k1 {:+.4} k2 {:+.4}",
+            f.display(), c.image_size[0], c.image_size[1], c.fx, c.fy, c.cx, c.cy, c.distortion.k1, c.distortion.k2
+        ),
+        _ => println!("camera   none given: orthographic"),
+    }
+    for im in &r.images {
+        let exposure = match (im.exposure, im.exposure_source) {
+            (Some(e), Some(src)) => format!("exposure {e:.4} ({src})"),
+            _ => "exposure unknown".into(),
+        };
+        let radii: Vec<String> = im.radii_mm.iter().map(|r| format!("{r}")).collect();
+        println!(
+            "image    {:<12} {}×{} {}-bit {} {}, {exposure}, spheres {} mm",
+            im.file, im.width, im.height, im.bits, if im.channels >= 3 { "RGB" } else { "grey" },
+            if im.linear { "linear" } else { "sRGB" }, radii.join(" ")
+        );
+    }
+    let radii: std::collections::BTreeSet<String> =
+        r.images.iter().flat_map(|i| i.radii_mm.iter().map(|r| format!("{r}"))).collect();
+    println!("ok: {} image(s), {} distinct radii", r.images.len(), radii.len());
+    Ok(())
+}
+
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // --help, --version, and no subcommand at all: clap's full text.
+        Err(e) if !e.use_stderr() || e.kind() == clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        Err(e) => {
+            // One line: clap's message without its usage block and hints.
+            let text = e.render().to_string();
+            let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("error: bad arguments");
+            eprintln!("{first}");
+            std::process::exit(2);
+        }
+    };
     let res = match cli.command {
         Command::Synth(Synth::Session(a)) => synth_session(a, cli.quiet),
         Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
+        Command::Check { session } => check(session),
     };
     if let Err(e) = res {
         eprintln!("error: {e:#}");

@@ -171,7 +171,7 @@ impl ExifInfo {
 fn image_err(path: &Path, e: image::ImageError) -> Error {
     Error::Image {
         path: path.to_path_buf(),
-        source: e,
+        err: e,
     }
 }
 

@@ -110,3 +110,101 @@ impl Session {
         }
     }
 }
+
+/// How a photo's pixel values are to be normalised, as found by [`inspect`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ImageInfo {
+    pub file: String,
+    pub path: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub bits: u8,
+    pub channels: u8,
+    /// Relative exposure, and where it came from ("session.json" or "EXIF").
+    pub exposure: Option<f64>,
+    pub exposure_source: Option<&'static str>,
+    pub linear: bool,
+    pub radii_mm: Vec<f64>,
+}
+
+/// A session checked against its files.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SessionReport {
+    pub session_file: PathBuf,
+    pub material: Option<String>,
+    pub intrinsics_file: Option<PathBuf>,
+    pub camera: Option<crate::camera::Camera>,
+    pub images: Vec<ImageInfo>,
+}
+
+/// Load a session and check it against its files without decoding pixels: every image exists and
+/// decodes its header, the sizes agree with each other and with the intrinsics, and the exposure
+/// normalisation is known for all images or for none.
+pub fn inspect(path: &Path) -> Result<SessionReport> {
+    use image::ImageDecoder;
+    let (s, file) = Session::load(path)?;
+    let (intrinsics_file, camera) = match &s.intrinsics {
+        Some(p) => {
+            let ip = Session::resolve(&file, p);
+            let cam = crate::intrinsics::IntrinsicsFile::load(&ip)?.camera();
+            (Some(ip), Some(cam))
+        }
+        None => (None, None),
+    };
+    let mut images = Vec::new();
+    for im in &s.images {
+        let p = Session::resolve(&file, &im.file);
+        let reader = image::ImageReader::open(&p)
+            .map_err(|e| Error::io(&p, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(&p, e))?;
+        let dec = reader.into_decoder().map_err(|e| Error::Image { path: p.clone(), err: e })?;
+        let (width, height) = dec.dimensions();
+        let ct = dec.color_type();
+        let channels = ct.channel_count();
+        let bits = (ct.bytes_per_pixel() / channels * 8) as u8;
+        let (exposure, exposure_source) = match im.exposure {
+            Some(e) => (Some(e), Some("session.json")),
+            None => match crate::photo::ExifInfo::read(&p)? {
+                Some(x) => (Some(x.relative_exposure()), Some("EXIF")),
+                None => (None, None),
+            },
+        };
+        if let Some(cam) = &camera {
+            if cam.image_size != [width, height] {
+                return Err(Error::invalid(
+                    &p,
+                    format!(
+                        "image is {width}×{height} but the intrinsics are for {}×{}",
+                        cam.image_size[0], cam.image_size[1]
+                    ),
+                ));
+            }
+        }
+        images.push(ImageInfo {
+            file: im.file.clone(),
+            path: p,
+            width,
+            height,
+            bits,
+            channels,
+            exposure,
+            exposure_source,
+            linear: im.linear.unwrap_or(bits > 8),
+            radii_mm: im.spheres.iter().map(|s| s.radius_mm).collect(),
+        });
+    }
+    let known = images.iter().filter(|i| i.exposure.is_some()).count();
+    if known != 0 && known != images.len() {
+        let missing: Vec<&str> =
+            images.iter().filter(|i| i.exposure.is_none()).map(|i| i.file.as_str()).collect();
+        return Err(Error::invalid(
+            &file,
+            format!(
+                "exposure unknown for {} (no EXIF, no \"exposure\"): cannot compare with the other images",
+                missing.join(", ")
+            ),
+        ));
+    }
+    Ok(SessionReport { session_file: file, material: s.material.clone(), intrinsics_file, camera, images })
+}
