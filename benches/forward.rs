@@ -28,23 +28,48 @@ fn samples(n: usize) -> Vec<Geometry> {
 
 fn bench_kernels(c: &mut Criterion) {
     let n = 10_000;
-    let thetas: Vec<f64> = (0..n).map(|i| std::f64::consts::PI * i as f64 / n as f64).collect();
+    let thetas: Vec<f64> = (0..n)
+        .map(|i| std::f64::consts::PI * i as f64 / n as f64)
+        .collect();
     let mut g = c.benchmark_group("kernels");
     g.throughput(Throughput::Elements(n as u64));
-    for (name, sigma) in [("cdrf_sigma0.1", 0.1), ("cdrf_sigma0.3", 0.3), ("cdrf_sigma1.5", 1.5)] {
+    for (name, sigma) in [
+        ("cdrf_sigma0.1", 0.1),
+        ("cdrf_sigma0.3", 0.3),
+        ("cdrf_sigma1.5", 1.5),
+    ] {
         g.bench_function(name, |b| {
-            b.iter(|| thetas.iter().map(|&t| cdrf::eval(t, black_box(sigma), Convolution::Wrapped).value).sum::<f64>())
+            b.iter(|| {
+                thetas
+                    .iter()
+                    .map(|&t| cdrf::eval(t, black_box(sigma), Convolution::Wrapped).value)
+                    .sum::<f64>()
+            })
         });
     }
     let geo = samples(n);
     let model = Model::default();
     let p = SessionConfig::default();
-    let params = Params { material: p.material, light: LightAngles { azimuth: 1.2, elevation: 0.35 } };
+    let params = Params {
+        material: p.material,
+        light: LightAngles {
+            azimuth: 1.2,
+            elevation: 0.35,
+        },
+    };
     g.bench_function("model_rgb", |b| {
-        b.iter(|| geo.iter().map(|gm| model.radiance(black_box(&params), gm)[0]).sum::<f64>())
+        b.iter(|| {
+            geo.iter()
+                .map(|gm| model.radiance(black_box(&params), gm)[0])
+                .sum::<f64>()
+        })
     });
     g.bench_function("model_rgb_with_gradient", |b| {
-        b.iter(|| geo.iter().map(|gm| model.radiance_with_gradient(black_box(&params), gm).1[0][0]).sum::<f64>())
+        b.iter(|| {
+            geo.iter()
+                .map(|gm| model.radiance_with_gradient(black_box(&params), gm).1[0][0])
+                .sum::<f64>()
+        })
     });
     g.finish();
 }
@@ -52,8 +77,14 @@ fn bench_kernels(c: &mut Criterion) {
 fn bench_synth(c: &mut Criterion) {
     let mut g = c.benchmark_group("synth_session_1280x960");
     g.sample_size(10);
-    for (name, layout) in [("separate_5_images", Layout::Separate), ("row_1_image", Layout::Row)] {
-        let cfg = SessionConfig { layout, ..SessionConfig::default() };
+    for (name, layout) in [
+        ("separate_5_images", Layout::Separate),
+        ("row_1_image", Layout::Row),
+    ] {
+        let cfg = SessionConfig {
+            layout,
+            ..SessionConfig::default()
+        };
         g.bench_function(name, |b| {
             b.iter_batched(
                 || tempfile::tempdir().unwrap(),
@@ -63,7 +94,12 @@ fn bench_synth(c: &mut Criterion) {
         });
         let plans = session::plan(&cfg).unwrap();
         g.bench_function(format!("{name}_render_only"), |b| {
-            b.iter(|| plans.iter().map(|p| session::render_linear(&cfg, &p.spheres)[0]).sum::<f64>())
+            b.iter(|| {
+                plans
+                    .iter()
+                    .map(|p| session::render_linear(&cfg, &p.spheres)[0])
+                    .sum::<f64>()
+            })
         });
     }
     g.finish();

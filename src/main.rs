@@ -337,7 +337,15 @@ fn check(session: PathBuf) -> Result<()> {
     match (&r.intrinsics_file, &r.camera) {
         (Some(f), Some(c)) => println!(
             "camera   {} — {}×{}, fx {:.1} fy {:.1} cx {:.1} cy {:.1}, k1 {:+.4} k2 {:+.4}",
-            f.display(), c.image_size[0], c.image_size[1], c.fx, c.fy, c.cx, c.cy, c.distortion.k1, c.distortion.k2
+            f.display(),
+            c.image_size[0],
+            c.image_size[1],
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy,
+            c.distortion.k1,
+            c.distortion.k2
         ),
         _ => println!("camera   none given: orthographic"),
     }
@@ -349,13 +357,25 @@ fn check(session: PathBuf) -> Result<()> {
         let radii: Vec<String> = im.radii_mm.iter().map(|r| format!("{r}")).collect();
         println!(
             "image    {:<12} {}×{} {}-bit {} {}, {exposure}, spheres {} mm",
-            im.file, im.width, im.height, im.bits, if im.channels >= 3 { "RGB" } else { "grey" },
-            if im.linear { "linear" } else { "sRGB" }, radii.join(" ")
+            im.file,
+            im.width,
+            im.height,
+            im.bits,
+            if im.channels >= 3 { "RGB" } else { "grey" },
+            if im.linear { "linear" } else { "sRGB" },
+            radii.join(" ")
         );
     }
-    let radii: std::collections::BTreeSet<String> =
-        r.images.iter().flat_map(|i| i.radii_mm.iter().map(|r| format!("{r}"))).collect();
-    println!("ok: {} image(s), {} distinct radii", r.images.len(), radii.len());
+    let radii: std::collections::BTreeSet<String> = r
+        .images
+        .iter()
+        .flat_map(|i| i.radii_mm.iter().map(|r| format!("{r}")))
+        .collect();
+    println!(
+        "ok: {} image(s), {} distinct radii",
+        r.images.len(),
+        radii.len()
+    );
     Ok(())
 }
 
@@ -363,11 +383,19 @@ fn main() {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // --help, --version, and no subcommand at all: clap's full text.
-        Err(e) if !e.use_stderr() || e.kind() == clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        Err(e)
+            if !e.use_stderr()
+                || e.kind() == clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand =>
+        {
+            e.exit()
+        }
         Err(e) => {
             // One line: clap's message without its usage block and hints.
             let text = e.render().to_string();
-            let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("error: bad arguments");
+            let first = text
+                .lines()
+                .find(|l| !l.trim().is_empty())
+                .unwrap_or("error: bad arguments");
             eprintln!("{first}");
             std::process::exit(2);
         }

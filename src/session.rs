@@ -158,7 +158,10 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             .map_err(|e| Error::io(&p, e))?
             .with_guessed_format()
             .map_err(|e| Error::io(&p, e))?;
-        let dec = reader.into_decoder().map_err(|e| Error::Image { path: p.clone(), err: e })?;
+        let dec = reader.into_decoder().map_err(|e| Error::Image {
+            path: p.clone(),
+            err: e,
+        })?;
         let (width, height) = dec.dimensions();
         let ct = dec.color_type();
         let channels = ct.channel_count();
@@ -196,8 +199,11 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
     }
     let known = images.iter().filter(|i| i.exposure.is_some()).count();
     if known != 0 && known != images.len() {
-        let missing: Vec<&str> =
-            images.iter().filter(|i| i.exposure.is_none()).map(|i| i.file.as_str()).collect();
+        let missing: Vec<&str> = images
+            .iter()
+            .filter(|i| i.exposure.is_none())
+            .map(|i| i.file.as_str())
+            .collect();
         return Err(Error::invalid(
             &file,
             format!(
@@ -206,5 +212,11 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             ),
         ));
     }
-    Ok(SessionReport { session_file: file, material: s.material.clone(), intrinsics_file, camera, images })
+    Ok(SessionReport {
+        session_file: file,
+        material: s.material.clone(),
+        intrinsics_file,
+        camera,
+        images,
+    })
 }

@@ -4,7 +4,10 @@ use std::path::Path;
 use std::process::Command;
 
 fn wb(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_workbench")).args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .args(args)
+        .output()
+        .unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -18,7 +21,10 @@ fn assert_clean_failure(args: &[&str], needle: &str) {
     assert!(!err.contains("panicked"), "{args:?}: {err}");
     let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
     assert!(lines.len() == 1 || err.contains("Usage"), "{args:?}: {err}");
-    assert!(err.contains(needle), "{args:?}: expected {needle:?} in {err}");
+    assert!(
+        err.contains(needle),
+        "{args:?}: expected {needle:?} in {err}"
+    );
 }
 
 #[test]
@@ -26,13 +32,24 @@ fn synth_then_check_a_session() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
     let o = out.to_str().unwrap();
-    let (code, stdout, err) = wb(&["--quiet", "synth", "session", "--out", o, "--size", "320x240", "--fx", "350", "--radii", "20,10", "--layout", "row"]);
+    let (code, stdout, err) = wb(&[
+        "--quiet", "synth", "session", "--out", o, "--size", "320x240", "--fx", "350", "--radii",
+        "20,10", "--layout", "row",
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("wrote 1 image(s)"));
     let (code, stdout, err) = wb(&["check", o]);
     assert_eq!(code, 0, "{err}");
-    assert!(stdout.contains("row.png") && stdout.contains("16-bit RGB linear") && stdout.contains("spheres 20 10 mm"), "{stdout}");
-    assert!(stdout.contains("exposure 1.2000 (session.json)"), "{stdout}");
+    assert!(
+        stdout.contains("row.png")
+            && stdout.contains("16-bit RGB linear")
+            && stdout.contains("spheres 20 10 mm"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("exposure 1.2000 (session.json)"),
+        "{stdout}"
+    );
 
     // The same session with a missing image: the error names the image file.
     std::fs::remove_file(out.join("row.png")).unwrap();
@@ -47,21 +64,54 @@ fn jpeg_session_uses_exif_exposure() {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("j");
     let o = o.to_str().unwrap();
-    let (code, _, err) = wb(&["--quiet", "synth", "session", "--out", o, "--size", "320x240", "--fx", "350", "--radii", "20", "--format", "jpeg", "--exposure", "0.5"]);
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "session",
+        "--out",
+        o,
+        "--size",
+        "320x240",
+        "--fx",
+        "350",
+        "--radii",
+        "20",
+        "--format",
+        "jpeg",
+        "--exposure",
+        "0.5",
+    ]);
     assert_eq!(code, 0, "{err}");
     let (code, stdout, err) = wb(&["check", o]);
     assert_eq!(code, 0, "{err}");
-    assert!(stdout.contains("8-bit RGB sRGB, exposure 0.5000 (EXIF)"), "{stdout}");
+    assert!(
+        stdout.contains("8-bit RGB sRGB, exposure 0.5000 (EXIF)"),
+        "{stdout}"
+    );
 }
 
 #[test]
 fn checkerboard_writes_views_and_truth() {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("c");
-    let (code, stdout, err) = wb(&["--quiet", "synth", "checkerboard", "--out", o.to_str().unwrap(), "--size", "320x240", "--fx", "350", "--views", "12"]);
+    let (code, stdout, err) = wb(&[
+        "--quiet",
+        "synth",
+        "checkerboard",
+        "--out",
+        o.to_str().unwrap(),
+        "--size",
+        "320x240",
+        "--fx",
+        "350",
+        "--views",
+        "12",
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("wrote 12 view(s)"));
-    assert!(Path::new(&o).join("view12.png").is_file() && Path::new(&o).join("truth.json").is_file());
+    assert!(
+        Path::new(&o).join("view12.png").is_file() && Path::new(&o).join("truth.json").is_file()
+    );
 }
 
 #[test]
@@ -69,20 +119,50 @@ fn bad_input_is_one_clear_line() {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("x");
     let o = o.to_str().unwrap();
-    assert_clean_failure(&["synth", "session", "--out", o, "--radii", "10,-2"], "radius -2 mm is not positive");
-    assert_clean_failure(&["synth", "session", "--out", o, "--radii", "10,abc"], "\"abc\" is not a number");
-    assert_clean_failure(&["synth", "session", "--out", o, "--size", "10by10"], "expected WIDTHxHEIGHT");
-    assert_clean_failure(&["synth", "session", "--out", o, "--distance", "20"], "do not fit");
-    assert_clean_failure(&["synth", "checkerboard", "--out", o, "--pattern", "1x6"], "at least 2×2");
-    assert_clean_failure(&["synth", "checkerboard", "--out", o, "--format", "gif"], "expected png or jpeg");
+    assert_clean_failure(
+        &["synth", "session", "--out", o, "--radii", "10,-2"],
+        "radius -2 mm is not positive",
+    );
+    assert_clean_failure(
+        &["synth", "session", "--out", o, "--radii", "10,abc"],
+        "\"abc\" is not a number",
+    );
+    assert_clean_failure(
+        &["synth", "session", "--out", o, "--size", "10by10"],
+        "expected WIDTHxHEIGHT",
+    );
+    assert_clean_failure(
+        &["synth", "session", "--out", o, "--distance", "20"],
+        "do not fit",
+    );
+    assert_clean_failure(
+        &["synth", "checkerboard", "--out", o, "--pattern", "1x6"],
+        "at least 2×2",
+    );
+    assert_clean_failure(
+        &["synth", "checkerboard", "--out", o, "--format", "gif"],
+        "expected png or jpeg",
+    );
     assert!(!Path::new(o).exists(), "nothing written for refused input");
 
     let s = dir.path().join("session.json");
     std::fs::write(&s, r#"{"schema":"workbench.session/1","images":[{"file":"a.png","spheres":[{"radius_mm":-3}]}]}"#).unwrap();
-    assert_clean_failure(&["check", s.to_str().unwrap()], "radius_mm must be a positive number");
+    assert_clean_failure(
+        &["check", s.to_str().unwrap()],
+        "radius_mm must be a positive number",
+    );
     std::fs::write(&s, r#"{"schema":"workbench.session/9","images":[]}"#).unwrap();
-    assert_clean_failure(&["check", s.to_str().unwrap()], "expected \"workbench.session/1\"");
+    assert_clean_failure(
+        &["check", s.to_str().unwrap()],
+        "expected \"workbench.session/1\"",
+    );
     std::fs::write(&s, "{ not json").unwrap();
-    assert_clean_failure(&["check", s.to_str().unwrap()], "session.json: invalid JSON");
-    assert_clean_failure(&["check", dir.path().join("nope").to_str().unwrap()], "nope: No such file");
+    assert_clean_failure(
+        &["check", s.to_str().unwrap()],
+        "session.json: invalid JSON",
+    );
+    assert_clean_failure(
+        &["check", dir.path().join("nope").to_str().unwrap()],
+        "nope: No such file",
+    );
 }

@@ -313,9 +313,17 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
 fn silhouette_box(cam: &Camera, s: &Sphere, pad: f64) -> Option<[f64; 4]> {
     let half = s.cone_half_angle()?;
     let axis = s.center.normalize();
-    let e1 = axis.cross(&Vector3::y()).try_normalize(1e-12).unwrap_or_else(|| axis.cross(&Vector3::x()).normalize());
+    let e1 = axis
+        .cross(&Vector3::y())
+        .try_normalize(1e-12)
+        .unwrap_or_else(|| axis.cross(&Vector3::x()).normalize());
     let e2 = axis.cross(&e1);
-    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    let mut b = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
     for k in 0..360 {
         let t = k as f64 * std::f64::consts::TAU / 360.0;
         let d = axis * half.cos() + (e1 * t.cos() + e2 * t.sin()) * half.sin();
@@ -375,14 +383,22 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     let n = cfg.supersample as usize;
     // Only pixels inside the spheres' padded bounding boxes can see a sphere: the rest is the
     // ambient floor, with no ray to trace.
-    let boxes: Vec<[f64; 4]> = spheres.iter().filter_map(|(_, s)| silhouette_box(cam, s, 3.0)).collect();
+    let boxes: Vec<[f64; 4]> = spheres
+        .iter()
+        .filter_map(|(_, s)| silhouette_box(cam, s, 3.0))
+        .collect();
     let mut img = vec![cfg.ambient; w * h * 3];
     img.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let yf = y as f64;
         let spans: Vec<(usize, usize)> = boxes
             .iter()
             .filter(|b| yf >= b[1] && yf <= b[3])
-            .map(|b| (b[0].max(0.0) as usize, (b[2].ceil().max(0.0) as usize).min(w - 1)))
+            .map(|b| {
+                (
+                    b[0].max(0.0) as usize,
+                    (b[2].ceil().max(0.0) as usize).min(w - 1),
+                )
+            })
             .collect();
         for x in (0..w).filter(|&x| spans.iter().any(|&(a, b)| x >= a && x <= b)) {
             let px = Vector2::new(x as f64, y as f64);
