@@ -46,6 +46,9 @@ pub struct IntrinsicsFile {
     /// Where the numbers come from, e.g. "synthetic truth" or "calibrated from 13 views".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
+    /// How the calibration was reached (pattern, model choice, cross-validation, EXIF, warnings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub details: Option<serde_json::Value>,
 }
 
 impl IntrinsicsFile {
@@ -63,6 +66,7 @@ impl IntrinsicsFile {
             std: None,
             views: vec![],
             source: Some("synthetic truth".into()),
+            details: None,
         }
     }
 

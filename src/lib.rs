@@ -4,14 +4,18 @@
 //! Conventions: millimetres; radians inside (degrees only in human-facing output); the OpenCV
 //! camera frame (x right, y down, z forward); light and view vectors point away from the surface.
 
+pub mod calibration;
 pub mod camera;
 pub mod cdrf;
+#[cfg(feature = "opencv")]
+pub mod cv;
 pub mod error;
 pub mod fresnel;
 pub mod intrinsics;
 pub mod model;
 pub mod output;
 pub mod photo;
+pub mod plot;
 pub mod progress;
 pub mod session;
 pub mod specular;

@@ -27,6 +27,9 @@ enum Command {
     /// Render ground-truth synthetic data.
     #[command(subcommand)]
     Synth(Synth),
+    /// Calibrate the camera from a folder of chessboard photos (OpenCV).
+    #[cfg(feature = "opencv")]
+    Calibrate(CalibrateArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -199,6 +202,24 @@ struct SessionArgs {
 }
 
 #[derive(Args)]
+struct CalibrateArgs {
+    /// Folder of chessboard photos (JPEG, PNG, TIFF).
+    dir: PathBuf,
+    /// Inner corners COLSxROWS (default: detected).
+    #[arg(long)]
+    pattern: Option<String>,
+    /// Square size, e.g. 25mm or 25.
+    #[arg(long, default_value = "25mm")]
+    square: String,
+    /// Where intrinsics.json goes (default: in the folder); the OpenCV YAML goes beside it.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Folder for the diagnostic plots (default: plots/ beside the output).
+    #[arg(long)]
+    plots: Option<PathBuf>,
+}
+
+#[derive(Args)]
 struct CheckerArgs {
     /// Output folder (created; files in it are replaced).
     #[arg(long)]
@@ -328,6 +349,100 @@ fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+#[cfg(feature = "opencv")]
+fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
+    use workbench::calibration::{run, Pattern};
+    let pattern = match &a.pattern {
+        Some(p) => Some(Pattern::parse(p).with_context(|| {
+            format!("--pattern {p:?}: expected COLSxROWS inner corners, at least 2x2, e.g. 9x6")
+        })?),
+        None => None,
+    };
+    let sq = a.square.trim().trim_end_matches("mm").trim();
+    let square_mm: f64 = sq
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .with_context(|| {
+            format!(
+                "--square {:?}: expected a positive size in mm, e.g. 25mm",
+                a.square
+            )
+        })?;
+    workbench::cv::set_threads(1);
+    let opts = run::Options {
+        dir: a.dir.clone(),
+        pattern,
+        square_mm,
+        out: a.out,
+        plots: a.plots,
+        quiet,
+    };
+    let r = run::run(&opts, &workbench::cv::OpenCvDetect, &workbench::cv::OpenCv)?;
+    let c = &r.calibration;
+    let cam = &c.camera;
+    println!(
+        "pattern  {} inner corners, {square_mm} mm squares",
+        r.pattern
+    );
+    println!(
+        "views    {} used, {} rejected as outliers, {} unusable, of {} image(s) read",
+        c.used.len(),
+        c.rejected.len(),
+        r.unusable.len(),
+        r.images_read
+    );
+    for (f, why) in &r.unusable {
+        println!("         {f}: {why}");
+    }
+    for n in &c.notes {
+        println!("note     {n}");
+    }
+    let sd = c.std.unwrap_or_default();
+    println!("model    {}", c.model.name());
+    println!("fx       {:10.3} ± {:.3} px", cam.fx, sd.fx);
+    println!("fy       {:10.3} ± {:.3} px", cam.fy, sd.fy);
+    println!("cx       {:10.3} ± {:.3} px", cam.cx, sd.cx);
+    println!("cy       {:10.3} ± {:.3} px", cam.cy, sd.cy);
+    let d = cam.distortion;
+    let e = sd.distortion;
+    println!(
+        "k1 k2    {:+.5} ± {:.5}   {:+.5} ± {:.5}",
+        d.k1, e.k1, d.k2, e.k2
+    );
+    println!(
+        "p1 p2 k3 {:+.6} ± {:.6}   {:+.6} ± {:.6}   {:+.5} ± {:.5}",
+        d.p1, e.p1, d.p2, e.p2, d.k3, e.k3
+    );
+    println!("RMS      {:.4} px over the used views", c.rms_px);
+    if let Some(cv) = c.cross_validation.iter().find(|v| v.model == c.model) {
+        let j = cv.jackknife_std;
+        println!(
+            "cross-validation ({}-fold): held-out RMS {:.4} px; jackknife std fx {:.2} fy {:.2} cx {:.2} cy {:.2} px",
+            cv.folds, cv.heldout_rms_px, j[0], j[1], j[2], j[3]
+        );
+    }
+    for n in r.exif_notes.iter().filter(|n| !n.starts_with("warning: ")) {
+        println!("exif     {n}");
+    }
+    for w in &c.warnings {
+        println!("warning  {w}");
+    }
+    println!(
+        "wrote    {} and {}",
+        r.intrinsics_file.display(),
+        r.yaml_file.display()
+    );
+    if let Some(dir) = r.plot_files.first().and_then(|p| p.parent()) {
+        println!("plots    {} ({} files)", dir.display(), r.plot_files.len());
+    }
+    println!(
+        "time     detection {:.2} s, calibration {:.2} s",
+        r.detection_s, r.calibration_s
+    );
+    Ok(())
+}
+
 fn check(session: PathBuf) -> Result<()> {
     let r = workbench::session::inspect(&session)?;
     println!("session  {}", r.session_file.display());
@@ -404,6 +519,8 @@ fn main() {
         Command::Synth(Synth::Session(a)) => synth_session(a, cli.quiet),
         Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
         Command::Check { session } => check(session),
+        #[cfg(feature = "opencv")]
+        Command::Calibrate(a) => calibrate(a, cli.quiet),
     };
     if let Err(e) = res {
         eprintln!("error: {e:#}");

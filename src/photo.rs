@@ -168,6 +168,22 @@ impl ExifInfo {
     }
 }
 
+/// Diagonal of a 36×24 mm frame, which "35 mm equivalent" focal lengths refer to.
+pub const FULL_FRAME_DIAGONAL_MM: f64 = 43.266_615;
+
+/// The 35 mm equivalent focal length of a lens on a sensor `sensor_width_mm` wide imaging
+/// `size` pixels (square pixels), by the diagonal.
+pub fn focal_35mm_equivalent(focal_mm: f64, sensor_width_mm: f64, size: [u32; 2]) -> f64 {
+    let diag_px = (size[0] as f64).hypot(size[1] as f64);
+    let sensor_diag_mm = sensor_width_mm * diag_px / size[0] as f64;
+    focal_mm * FULL_FRAME_DIAGONAL_MM / sensor_diag_mm
+}
+
+/// The focal length in pixels that a 35 mm equivalent focal length implies for an image size.
+pub fn fx_from_35mm(f35_mm: f64, size: [u32; 2]) -> f64 {
+    f35_mm * (size[0] as f64).hypot(size[1] as f64) / FULL_FRAME_DIAGONAL_MM
+}
+
 fn image_err(path: &Path, e: image::ImageError) -> Error {
     Error::Image {
         path: path.to_path_buf(),
@@ -253,4 +269,35 @@ mod tests {
         assert!((relative_exposure(1.0 / 60.0, 400.0, 8.0) - 2.0).abs() < 1e-12);
         assert!((relative_exposure(1.0 / 30.0, 100.0, 4.0) - 4.0).abs() < 1e-12);
     }
+}
+
+/// An 8-bit greyscale image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gray8 {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+/// Decode any supported image (JPEG, PNG, TIFF; 8 or 16 bit) to 8-bit grey, with its EXIF
+/// orientation applied.
+pub fn load_gray8(path: &Path) -> Result<Gray8> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    if reader.format().is_none() {
+        return Err(Error::invalid(path, "not a JPEG, PNG or TIFF image"));
+    }
+    let mut dec = reader.into_decoder().map_err(|e| image_err(path, e))?;
+    let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
+    let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
+    img.apply_orientation(orientation);
+    let g = img.to_luma8();
+    Ok(Gray8 {
+        width: g.width(),
+        height: g.height(),
+        data: g.into_raw(),
+    })
 }

@@ -330,6 +330,11 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
         BoardFormat::Jpeg => "jpg",
     };
     let pb = crate::progress::bar(poses.len() as u64, "rendering", quiet);
+    // EXIF (JPEG only): the lens as a 23.5 mm wide sensor would see it.
+    let sensor_w = 23.5;
+    let focal_mm = cam.fx * sensor_w / cam.width() as f64;
+    let f35 = photo::focal_35mm_equivalent(focal_mm, sensor_w, cam.image_size).round() as u32;
+    let exif = photo::ExifInfo::for_exposure(1.0, "workbench", "synthetic camera", focal_mm, f35);
     let mut views = Vec::new();
     let mut images = Vec::new();
     for (k, pose) in poses.iter().enumerate() {
@@ -354,7 +359,15 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
             .collect();
         let file = format!("view{:02}.{ext}", k + 1);
         let path = out.join(&file);
-        photo::write_8bit(&path, w as u32, h as u32, 1, &data, cfg.jpeg_quality, None)?;
+        photo::write_8bit(
+            &path,
+            w as u32,
+            h as u32,
+            1,
+            &data,
+            cfg.jpeg_quality,
+            Some(&exif),
+        )?;
         let mut corners = Vec::new();
         for j in 0..cfg.inner[1] {
             for i in 0..cfg.inner[0] {

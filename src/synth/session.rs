@@ -460,7 +460,8 @@ pub fn generate(
     let (w, h) = (cam.width() as usize, cam.height() as usize);
     let pb = crate::progress::bar(plans.len() as u64, "rendering", quiet);
     let focal_mm = cam.fx * cfg.sensor_width_mm / cam.width() as f64;
-    let f35 = (focal_mm * 36.0 / cfg.sensor_width_mm).round() as u32;
+    let f35 =
+        photo::focal_35mm_equivalent(focal_mm, cfg.sensor_width_mm, cam.image_size).round() as u32;
     let exif = ExifInfo::for_exposure(cfg.exposure, "workbench", "synthetic camera", focal_mm, f35);
     let mut images = Vec::new();
     let mut truth_images = Vec::new();

@@ -1,0 +1,348 @@
+//! `workbench calibrate <dir>/`: a folder of chessboard photos → `intrinsics.json`, the same
+//! calibration as OpenCV FileStorage YAML, and diagnostic plots.
+
+use super::{calibrate, Backend, Calibration, Pattern, View};
+use crate::error::{Error, Result};
+use crate::intrinsics::{IntrinsicsFile, ViewReport, SCHEMA};
+use crate::photo::{self, ExifInfo, Gray8};
+use nalgebra::Vector2;
+use rayon::prelude::*;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+/// What the command was asked.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub dir: PathBuf,
+    pub pattern: Option<Pattern>,
+    pub square_mm: f64,
+    /// intrinsics.json path (default `<dir>/intrinsics.json`); the YAML goes beside it.
+    pub out: Option<PathBuf>,
+    /// Plot folder (default `<out's folder>/plots`).
+    pub plots: Option<PathBuf>,
+    pub quiet: bool,
+}
+
+/// What the command produced.
+#[derive(Debug)]
+pub struct Report {
+    pub calibration: Calibration,
+    pub pattern: Pattern,
+    pub images_read: usize,
+    /// Images that gave no view, with the reason.
+    pub unusable: Vec<(String, String)>,
+    pub exif_notes: Vec<String>,
+    pub intrinsics_file: PathBuf,
+    pub yaml_file: PathBuf,
+    pub plot_files: Vec<PathBuf>,
+    pub detection_s: f64,
+    pub calibration_s: f64,
+}
+
+/// Detectors a calibration can use (implemented by OpenCV in [`crate::cv`]).
+pub trait Detect: Sync {
+    /// Corners by the classic and by the sector-based detector (either may be absent).
+    fn detect_both(&self, img: &Gray8, pattern: Pattern) -> Result<[Option<Vec<Vector2<f64>>>; 2]>;
+    fn guess_pattern(&self, img: &Gray8) -> Result<Option<Pattern>>;
+    /// YAML text of the calibration in OpenCV FileStorage format.
+    fn yaml(&self, cam: &crate::camera::Camera) -> Result<String>;
+}
+
+const IMAGE_EXTENSIONS: [&str; 5] = ["jpg", "jpeg", "png", "tif", "tiff"];
+
+/// The image files of a folder (not recursive), sorted by name.
+pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut files: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+fn name(p: &Path) -> String {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Run the whole calibration.
+pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result<Report> {
+    let t0 = std::time::Instant::now();
+    if !(opts.square_mm.is_finite() && opts.square_mm > 0.0) {
+        return Err(Error::Argument(format!(
+            "square size must be positive, got {} mm",
+            opts.square_mm
+        )));
+    }
+    let files = image_files(&opts.dir)?;
+    if files.is_empty() {
+        return Err(Error::invalid(
+            &opts.dir,
+            "no JPEG, PNG or TIFF images in this folder",
+        ));
+    }
+    let pb = crate::progress::bar(files.len() as u64, "reading", opts.quiet);
+    let loaded: Vec<(PathBuf, Result<(Gray8, Option<ExifInfo>)>)> = files
+        .par_iter()
+        .map(|p| {
+            let r = photo::load_gray8(p).and_then(|g| Ok((g, ExifInfo::read(p).unwrap_or(None))));
+            pb.inc(1);
+            (p.clone(), r)
+        })
+        .collect();
+    pb.finish_and_clear();
+    let mut unusable: Vec<(String, String)> = vec![];
+    let mut images: Vec<(String, Gray8, Option<ExifInfo>)> = vec![];
+    for (p, r) in loaded {
+        match r {
+            Ok((g, e)) => images.push((name(&p), g, e)),
+            Err(e) => unusable.push((name(&p), format!("unreadable: {e}"))),
+        }
+    }
+    let images_read = files.len();
+    let size = match images.first() {
+        Some((_, g, _)) => [g.width, g.height],
+        None => return Err(no_view(&opts.dir, images_read, &unusable)),
+    };
+    if let Some((f, g, _)) = images.iter().find(|(_, g, _)| [g.width, g.height] != size) {
+        return Err(Error::invalid(
+            opts.dir.join(f),
+            format!(
+                "image is {}×{} but {} is {}×{}: one calibration needs one image size",
+                g.width, g.height, images[0].0, size[0], size[1]
+            ),
+        ));
+    }
+    let pattern = match opts.pattern {
+        Some(p) => p,
+        None => {
+            let mut found = None;
+            for (_, g, _) in images.iter().take(8) {
+                if let Some(p) = detect.guess_pattern(g)? {
+                    found = Some(p);
+                    break;
+                }
+            }
+            found.ok_or_else(|| {
+                Error::invalid(&opts.dir, "no chessboard of a common size found in the first images: give --pattern COLSxROWS (inner corners)")
+            })?
+        }
+    };
+    let pb = crate::progress::bar(images.len() as u64, "detecting", opts.quiet);
+    let detections: Vec<Result<[Option<Vec<Vector2<f64>>>; 2]>> = images
+        .par_iter()
+        .map(|(_, g, _)| {
+            let r = detect.detect_both(g, pattern);
+            pb.inc(1);
+            r
+        })
+        .collect();
+    pb.finish_and_clear();
+    let detection_s = t0.elapsed().as_secs_f64();
+    let t1 = std::time::Instant::now();
+    let object = pattern.object_points(opts.square_mm);
+    // First pass: the classic detection where there is one, else the sector-based one.
+    let mut candidates: Vec<(String, [Option<Vec<Vector2<f64>>>; 2])> = vec![];
+    for ((f, _, _), d) in images.iter().zip(detections) {
+        match d {
+            Ok([None, None]) => {
+                unusable.push((f.clone(), format!("no {pattern} chessboard found")))
+            }
+            Ok(both) => candidates.push((f.clone(), both)),
+            Err(e) => unusable.push((f.clone(), format!("detection failed: {e}"))),
+        }
+    }
+    if candidates.len() < 3 {
+        return Err(no_view(&opts.dir, images_read, &unusable));
+    }
+    let first: Vec<&[Vector2<f64>]> = candidates
+        .iter()
+        .map(|(_, b)| b[0].as_deref().or(b[1].as_deref()).unwrap_or(&[]))
+        .collect();
+    let initial = backend.calibrate(&first, &object, size, super::DistortionModel::K1K2P1P2)?;
+    // Keep, per view, the detector whose corners the initial camera explains better.
+    let mut views = vec![];
+    for (f, both) in candidates {
+        let mut best: Option<(f64, Vec<Vector2<f64>>, &'static str)> = None;
+        for (k, c) in both.into_iter().enumerate() {
+            let Some(c) = c else { continue };
+            let e = match backend.pose(&initial.camera, &c, &object) {
+                Ok(pose) => super::rms(&super::view_residuals(&initial.camera, &pose, &c, &object)),
+                Err(_) => f64::INFINITY,
+            };
+            if best.as_ref().is_none_or(|b| e < b.0) {
+                best = Some((e, c, if k == 0 { "classic" } else { "sb" }));
+            }
+        }
+        if let Some((_, corners, detector)) = best {
+            views.push(View {
+                file: f,
+                corners,
+                detector,
+            });
+        }
+    }
+    let mut cal = calibrate(backend, views, &object, size)?;
+    for (f, why) in &unusable {
+        cal.reports.push(ViewReport {
+            file: f.clone(),
+            rms_px: None,
+            status: why.clone(),
+        });
+    }
+    cal.reports.sort_by(|a, b| a.file.cmp(&b.file));
+    let exif_notes = exif_checks(
+        &images
+            .iter()
+            .map(|(f, _, e)| (f.clone(), e.clone()))
+            .collect::<Vec<_>>(),
+        &cal,
+        size,
+    );
+    cal.warnings.extend(
+        exif_notes
+            .iter()
+            .filter(|n| n.starts_with("warning: "))
+            .map(|n| n[9..].to_string()),
+    );
+    let calibration_s = t1.elapsed().as_secs_f64();
+
+    // Outputs.
+    let intrinsics_file = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| opts.dir.join("intrinsics.json"));
+    let yaml_file = intrinsics_file.with_extension("yml");
+    let out_dir = intrinsics_file
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let plot_dir = opts.plots.clone().unwrap_or_else(|| out_dir.join("plots"));
+    let c = &cal.camera;
+    let file = IntrinsicsFile {
+        schema: SCHEMA.into(),
+        image_size: size,
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        distortion: c.distortion,
+        rms_px: Some(cal.rms_px),
+        std: cal.std,
+        views: cal.reports.clone(),
+        source: Some(format!(
+            "calibrated from {} view(s) of {}",
+            cal.used.len(),
+            opts.dir.display()
+        )),
+        details: Some(json!({
+            "pattern": [pattern.cols, pattern.rows],
+            "square_mm": opts.square_mm,
+            "distortion_model": cal.model.name(),
+            "cross_validation": cal.cross_validation,
+            "notes": cal.notes,
+            "warnings": cal.warnings,
+            "exif": exif_notes,
+            "images_read": images_read,
+        })),
+    };
+    crate::output::write_json(&intrinsics_file, &file)?;
+    crate::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
+    let plot_files = super::plots::write_all(&cal, &object, size, &plot_dir)?;
+    Ok(Report {
+        calibration: cal,
+        pattern,
+        images_read,
+        unusable,
+        exif_notes,
+        intrinsics_file,
+        yaml_file,
+        plot_files,
+        detection_s,
+        calibration_s,
+    })
+}
+
+fn no_view(dir: &Path, read: usize, why: &[(String, String)]) -> Error {
+    let reasons: Vec<String> = why.iter().map(|(f, w)| format!("{f}: {w}")).collect();
+    Error::invalid(
+        dir,
+        format!(
+            "no calibration possible: {read} image(s) read, {} usable (3 needed){}{}",
+            read - why.len(),
+            if reasons.is_empty() { "" } else { "; " },
+            reasons.join("; ")
+        ),
+    )
+}
+
+/// EXIF sanity checks: one camera and one focal length across the set, and the fitted fx against
+/// the lens's 35 mm equivalent focal length. Lines starting "warning: " are warnings.
+pub fn exif_checks(
+    exif: &[(String, Option<ExifInfo>)],
+    cal: &Calibration,
+    size: [u32; 2],
+) -> Vec<String> {
+    let mut notes = vec![];
+    let with: Vec<&ExifInfo> = exif.iter().filter_map(|(_, e)| e.as_ref()).collect();
+    if with.is_empty() {
+        notes.push("no EXIF camera settings in the images: fx not checked against the lens".into());
+        return notes;
+    }
+    let mut cameras: Vec<String> = with
+        .iter()
+        .map(|e| format!("{} {}", e.make, e.model).trim().to_string())
+        .collect();
+    cameras.sort();
+    cameras.dedup();
+    if cameras.len() > 1 {
+        notes.push(format!(
+            "warning: the images come from different cameras: {}",
+            cameras.join(", ")
+        ));
+    } else {
+        notes.push(format!("camera: {}", cameras[0]));
+    }
+    let mut focals: Vec<String> = with
+        .iter()
+        .map(|e| format!("{:.1} mm", e.focal_length_mm))
+        .collect();
+    focals.sort();
+    focals.dedup();
+    if focals.len() > 1 {
+        notes.push(format!(
+            "warning: the images were taken at different focal lengths: {}",
+            focals.join(", ")
+        ));
+    }
+    match with.iter().find_map(|e| e.focal_length_35mm) {
+        Some(f35) => {
+            let expected = photo::fx_from_35mm(f35 as f64, size);
+            let ratio = cal.camera.fx / expected;
+            let line = format!(
+                "lens: {:.1} mm ({f35} mm equivalent) implies fx ≈ {expected:.0} px; fitted fx = {:.1} px ({:+.1}%)",
+                with[0].focal_length_mm,
+                cal.camera.fx,
+                100.0 * (ratio - 1.0)
+            );
+            if (ratio - 1.0).abs() > 0.10 {
+                notes.push(format!("warning: {line}: more than 10% apart — check the pattern size, the square size and the images"));
+            } else {
+                notes.push(line);
+            }
+        }
+        None => notes.push(format!(
+            "lens: {:.1} mm, but no 35 mm equivalent in EXIF: fx not checked against it",
+            with[0].focal_length_mm
+        )),
+    }
+    notes
+}
