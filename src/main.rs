@@ -217,6 +217,18 @@ struct CalibrateArgs {
     /// Folder for the diagnostic plots (default: plots/ beside the output).
     #[arg(long)]
     plots: Option<PathBuf>,
+    /// auto: classic everywhere, the slower sector-based detector where the classic one fails
+    /// or gives a view whose error stands out; or classic, sb, both.
+    #[arg(long, value_enum, default_value = "auto")]
+    detector: DetectorArg,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum DetectorArg {
+    Auto,
+    Classic,
+    Sb,
+    Both,
 }
 
 #[derive(Args)]
@@ -370,12 +382,20 @@ fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
             )
         })?;
     workbench::cv::set_threads(1);
+    use workbench::calibration::DetectorChoice;
+    let detector = match a.detector {
+        DetectorArg::Auto => DetectorChoice::Auto,
+        DetectorArg::Classic => DetectorChoice::Classic,
+        DetectorArg::Sb => DetectorChoice::SectorBased,
+        DetectorArg::Both => DetectorChoice::Both,
+    };
     let opts = run::Options {
         dir: a.dir.clone(),
         pattern,
         square_mm,
         out: a.out,
         plots: a.plots,
+        detector,
         quiet,
     };
     let r = run::run(&opts, &workbench::cv::OpenCvDetect, &workbench::cv::OpenCv)?;

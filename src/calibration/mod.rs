@@ -56,23 +56,36 @@ impl std::fmt::Display for Pattern {
     }
 }
 
-/// Pattern sizes tried, largest first, when none is given.
-pub const COMMON_PATTERNS: [(u32, u32); 14] = [
-    (13, 9),
-    (11, 8),
-    (10, 7),
-    (9, 7),
-    (9, 6),
-    (8, 6),
-    (7, 6),
-    (8, 5),
-    (7, 5),
-    (6, 5),
-    (9, 5),
-    (7, 4),
-    (6, 4),
-    (5, 4),
-];
+/// Which chessboard detector found a set of corners.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Detector {
+    /// `findChessboardCorners` + `cornerSubPix`.
+    Classic,
+    /// `findChessboardCornersSB` (exhaustive, accuracy): more accurate, 20–100× slower.
+    SectorBased,
+}
+
+impl Detector {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Detector::Classic => "classic",
+            Detector::SectorBased => "sb",
+        }
+    }
+}
+
+/// Which detectors a calibration runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DetectorChoice {
+    /// Classic everywhere; the sector-based detector where the classic one found nothing or gave
+    /// a view whose error stands out (> 1.5× the median), keeping whichever the camera explains
+    /// better.
+    Auto,
+    Classic,
+    SectorBased,
+    /// Both on every view, keeping the better.
+    Both,
+}
 
 /// Board pose: Rodrigues rotation vector and translation (mm), board → camera.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,7 @@
 //! `workbench calibrate <dir>/`: a folder of chessboard photos → `intrinsics.json`, the same
 //! calibration as OpenCV FileStorage YAML, and diagnostic plots.
 
-use super::{calibrate, Backend, Calibration, Pattern, View};
+use super::{calibrate, Backend, Calibration, Detector, DetectorChoice, Pattern, View};
 use crate::error::{Error, Result};
 use crate::intrinsics::{IntrinsicsFile, ViewReport, SCHEMA};
 use crate::photo::{self, ExifInfo, Gray8};
@@ -20,6 +20,7 @@ pub struct Options {
     pub out: Option<PathBuf>,
     /// Plot folder (default `<out's folder>/plots`).
     pub plots: Option<PathBuf>,
+    pub detector: DetectorChoice,
     pub quiet: bool,
 }
 
@@ -41,8 +42,13 @@ pub struct Report {
 
 /// Detectors a calibration can use (implemented by OpenCV in [`crate::cv`]).
 pub trait Detect: Sync {
-    /// Corners by the classic and by the sector-based detector (either may be absent).
-    fn detect_both(&self, img: &Gray8, pattern: Pattern) -> Result<[Option<Vec<Vector2<f64>>>; 2]>;
+    /// The chessboard's inner corners by one detector; `None` when it finds no board.
+    fn detect(
+        &self,
+        img: &Gray8,
+        pattern: Pattern,
+        detector: Detector,
+    ) -> Result<Option<Vec<Vector2<f64>>>>;
     fn guess_pattern(&self, img: &Gray8) -> Result<Option<Pattern>>;
     /// YAML text of the calibration in OpenCV FileStorage format.
     fn yaml(&self, cam: &crate::camera::Camera) -> Result<String>;
@@ -136,28 +142,104 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             })?
         }
     };
-    let pb = crate::progress::bar(images.len() as u64, "detecting", opts.quiet);
-    let detections: Vec<Result<[Option<Vec<Vector2<f64>>>; 2]>> = images
-        .par_iter()
-        .map(|(_, g, _)| {
-            let r = detect.detect_both(g, pattern);
-            pb.inc(1);
-            r
-        })
+    let object = pattern.object_points(opts.square_mm);
+    // Detections per image: [classic, sector-based], each not run (None), no board (Some(None))
+    // or corners.
+    type Found = Option<Option<Vec<Vector2<f64>>>>;
+    let mut found: Vec<[Found; 2]> = vec![[None, None]; images.len()];
+    let mut errors: Vec<Option<String>> = vec![None; images.len()];
+    let run_pass = |which: Detector,
+                    todo: &[usize],
+                    found: &mut Vec<[Found; 2]>,
+                    errors: &mut Vec<Option<String>>| {
+        let pb = crate::progress::bar(
+            todo.len() as u64,
+            &format!("{} detector", which.name()),
+            opts.quiet,
+        );
+        let res: Vec<(usize, Result<Option<Vec<Vector2<f64>>>>)> = todo
+            .par_iter()
+            .map(|&i| {
+                let r = detect.detect(&images[i].1, pattern, which);
+                pb.inc(1);
+                (i, r)
+            })
+            .collect();
+        pb.finish_and_clear();
+        for (i, r) in res {
+            match r {
+                Ok(c) => found[i][which as usize] = Some(c),
+                Err(e) => errors[i] = Some(e.to_string()),
+            }
+        }
+    };
+    let all: Vec<usize> = (0..images.len()).collect();
+    if opts.detector != DetectorChoice::SectorBased {
+        run_pass(Detector::Classic, &all, &mut found, &mut errors);
+    }
+    let sb_todo: Vec<usize> = match opts.detector {
+        DetectorChoice::Classic => vec![],
+        DetectorChoice::SectorBased | DetectorChoice::Both => all.clone(),
+        DetectorChoice::Auto => all
+            .iter()
+            .cloned()
+            .filter(|&i| !matches!(found[i][0], Some(Some(_))))
+            .collect(),
+    };
+    run_pass(Detector::SectorBased, &sb_todo, &mut found, &mut errors);
+    let corners_of = |f: &[Found; 2], d: Detector| f[d as usize].clone().flatten();
+    let usable: Vec<usize> = all
+        .iter()
+        .cloned()
+        .filter(|&i| found[i].iter().any(|f| matches!(f, Some(Some(_)))))
         .collect();
-    pb.finish_and_clear();
+    if usable.len() >= 3 && opts.detector == DetectorChoice::Auto {
+        // Views whose classic corners the first camera explains badly get the sector-based
+        // detector too.
+        let first: Vec<Vec<Vector2<f64>>> = usable
+            .iter()
+            .map(|&i| {
+                corners_of(&found[i], Detector::Classic)
+                    .or_else(|| corners_of(&found[i], Detector::SectorBased))
+                    .unwrap_or_default()
+            })
+            .collect();
+        let refs: Vec<&[Vector2<f64>]> = first.iter().map(|v| v.as_slice()).collect();
+        let sol = backend.calibrate(&refs, &object, size, super::DistortionModel::K1K2P1P2)?;
+        let errs: Vec<f64> = refs
+            .iter()
+            .zip(&sol.poses)
+            .map(|(v, p)| super::rms(&super::view_residuals(&sol.camera, p, v, &object)))
+            .collect();
+        let med = super::median(&errs);
+        let suspicious: Vec<usize> = usable
+            .iter()
+            .zip(&errs)
+            .filter(|(&i, &e)| e > (1.5 * med).max(med + 0.1) && found[i][1].is_none())
+            .map(|(&i, _)| i)
+            .collect();
+        run_pass(Detector::SectorBased, &suspicious, &mut found, &mut errors);
+    }
     let detection_s = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
-    let object = pattern.object_points(opts.square_mm);
-    // First pass: the classic detection where there is one, else the sector-based one.
+    let runs = |d: Detector| found.iter().filter(|f| f[d as usize].is_some()).count();
+    let detector_note = format!(
+        "detectors: classic run on {} image(s), sector-based on {}",
+        runs(Detector::Classic),
+        runs(Detector::SectorBased)
+    );
     let mut candidates: Vec<(String, [Option<Vec<Vector2<f64>>>; 2])> = vec![];
-    for ((f, _, _), d) in images.iter().zip(detections) {
-        match d {
-            Ok([None, None]) => {
+    for (i, (f, _, _)) in images.iter().enumerate() {
+        let both = [
+            corners_of(&found[i], Detector::Classic),
+            corners_of(&found[i], Detector::SectorBased),
+        ];
+        match (&errors[i], &both) {
+            (Some(e), [None, None]) => unusable.push((f.clone(), format!("detection failed: {e}"))),
+            (_, [None, None]) => {
                 unusable.push((f.clone(), format!("no {pattern} chessboard found")))
             }
-            Ok(both) => candidates.push((f.clone(), both)),
-            Err(e) => unusable.push((f.clone(), format!("detection failed: {e}"))),
+            _ => candidates.push((f.clone(), both)),
         }
     }
     if candidates.len() < 3 {
@@ -191,6 +273,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         }
     }
     let mut cal = calibrate(backend, views, &object, size)?;
+    cal.notes.insert(0, detector_note);
     for (f, why) in &unusable {
         cal.reports.push(ViewReport {
             file: f.clone(),
