@@ -9,4 +9,11 @@ wb=target/release/workbench
 if [ ! -f datasets/demo/session.json ] || [ ! -f calib/demo/truth.json ]; then
   datasets/generate.sh "$wb"
 fi
+# A known calibration is not redone: calibrate only when intrinsics.json is missing or older
+# than the photos.
+if [ ! -f calib/demo/intrinsics.json ] || [ -n "$(find calib/demo -maxdepth 1 -name 'view*' -newer calib/demo/intrinsics.json)" ]; then
+  "$wb" calibrate calib/demo
+else
+  echo "calib/demo/intrinsics.json is up to date: calibration reused"
+fi
 "$wb" check datasets/demo

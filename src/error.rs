@@ -12,7 +12,7 @@ pub enum Error {
         path: PathBuf,
         err: serde_json::Error,
     },
-    #[error("{}: {err}", path.display())]
+    #[error("{}: {}", path.display(), one_line(&err.to_string()))]
     Image {
         path: PathBuf,
         err: image::ImageError,
@@ -39,4 +39,9 @@ impl Error {
             msg: msg.into(),
         }
     }
+}
+
+/// Collapse whitespace runs (decoder messages can carry newlines) so an error prints as one line.
+pub fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }

@@ -2,7 +2,7 @@
 //! calibration as OpenCV FileStorage YAML, and diagnostic plots.
 
 use super::{calibrate, Backend, Calibration, Detector, DetectorChoice, Pattern, View};
-use crate::error::{Error, Result};
+use crate::error::{one_line, Error, Result};
 use crate::intrinsics::{IntrinsicsFile, ViewReport, SCHEMA};
 use crate::photo::{self, ExifInfo, Gray8};
 use nalgebra::Vector2;
@@ -110,7 +110,10 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
     for (p, r) in loaded {
         match r {
             Ok((g, e)) => images.push((name(&p), g, e)),
-            Err(e) => unusable.push((name(&p), format!("unreadable: {e}"))),
+            Err(e) => unusable.push((
+                name(&p),
+                format!("unreadable: {}", one_line(&e.to_string())),
+            )),
         }
     }
     let images_read = files.len();
@@ -235,7 +238,9 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             corners_of(&found[i], Detector::SectorBased),
         ];
         match (&errors[i], &both) {
-            (Some(e), [None, None]) => unusable.push((f.clone(), format!("detection failed: {e}"))),
+            (Some(e), [None, None]) => {
+                unusable.push((f.clone(), format!("detection failed: {}", one_line(e))))
+            }
             (_, [None, None]) => {
                 unusable.push((f.clone(), format!("no {pattern} chessboard found")))
             }

@@ -207,12 +207,17 @@ pub fn poses(cfg: &CheckerConfig) -> Result<Vec<Pose>> {
                 sign(k % 4 >= 2) * tilt(&mut rng) * 0.8,
             ),
         };
-        let roll = rng.random_range(-20f64..20f64).to_radians();
+        // Views aimed at the centre fill more of the frame; those aimed at edges are smaller, and
+        // those aimed at the frame's corners smaller still and hardly rolled, so that their inner
+        // corners reach into the frame's corners.
+        let at_corner = (1..=4).contains(&(k % grid.len()));
+        let roll_max = if at_corner { 5f64 } else { 20f64 };
+        let roll = rng.random_range(-roll_max..roll_max).to_radians();
         let rotation = Rotation3::from_euler_angles(pitch, yaw, roll);
-        // Views aimed at the centre fill more of the frame; those aimed at edges are smaller, so
-        // their corners get close to the frame's edges.
         let frac = if k % grid.len() == 0 {
             rng.random_range(0.6..0.75)
+        } else if at_corner {
+            rng.random_range(0.28..0.38)
         } else {
             rng.random_range(0.35..0.5)
         };
