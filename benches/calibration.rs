@@ -21,6 +21,7 @@ fn opts(dir: &Path, out: &Path, detector: DetectorChoice) -> Options {
         out: Some(out.join("intrinsics.json")),
         plots: None,
         detector,
+        subpix_window: None,
         quiet: true,
     }
 }
@@ -38,7 +39,12 @@ fn main() {
         let mut worst = [0.0f64; 6];
         let mut rms = 0.0;
         for &seed in &seeds {
-            let cfg = CheckerConfig { noise, read_noise: read, seed, ..CheckerConfig::default() };
+            let cfg = CheckerConfig {
+                noise,
+                read_noise: read,
+                seed,
+                ..CheckerConfig::default()
+            };
             let d = tmp.path().join(format!("n{noise}-{seed}"));
             let t = generate(&cfg, &d, true).unwrap().truth.intrinsics;
             let r = run(&opts(&d, &d, DetectorChoice::Auto), &OpenCvDetect, &OpenCv).unwrap();
@@ -63,15 +69,23 @@ fn main() {
             seeds.len(), worst[0], worst[1], worst[2], worst[3], worst[4], worst[5]
         );
     }
-    println!("\n(worst over the seeds; truth fx = fy = 1400, cx 643.2, cy 478.5, k1 −0.12, k2 0.08)");
+    println!(
+        "\n(worst over the seeds; truth fx = fy = 1400, cx 643.2, cy 478.5, k1 −0.12, k2 0.08)"
+    );
 
     let left = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/opencv-left");
     if left.is_dir() {
         println!("\n### OpenCV's sample photos (opencv-left, 13 views 640×480), same run\n");
         println!("| method | views | fx | fy | cx | cy | k1 | RMS px | time s |");
         println!("|---|---|---|---|---|---|---|---|---|");
-        for (name, det) in [("workbench, classic detector", DetectorChoice::Classic), ("workbench, auto (default)", DetectorChoice::Auto), ("workbench, both detectors", DetectorChoice::Both)] {
-            let out = tmp.path().join(format!("left-{name}").replace([' ', ','], "_"));
+        for (name, det) in [
+            ("workbench, classic detector", DetectorChoice::Classic),
+            ("workbench, auto (default)", DetectorChoice::Auto),
+            ("workbench, both detectors", DetectorChoice::Both),
+        ] {
+            let out = tmp
+                .path()
+                .join(format!("left-{name}").replace([' ', ','], "_"));
             let t0 = Instant::now();
             let r = run(&opts(&left, &out, det), &OpenCvDetect, &OpenCv).unwrap();
             let dt = t0.elapsed().as_secs_f64();
@@ -83,7 +97,12 @@ fn main() {
             );
         }
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/cv2_calibrate.py");
-        match std::process::Command::new("/usr/bin/python3").arg(&script).arg(&left).args(["9", "6", "25"]).output() {
+        match std::process::Command::new("/usr/bin/python3")
+            .arg(&script)
+            .arg(&left)
+            .args(["9", "6", "25"])
+            .output()
+        {
             Ok(o) if o.status.success() => {
                 let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
                 let f = |k: &str| j[k].as_f64().unwrap();
@@ -92,10 +111,15 @@ fn main() {
                     j["views"], f("fx"), f("fy"), f("cx"), f("cy"), f("k1"), f("rms"), f("detect_s") + f("calibrate_s"), f("detect_s"), f("calibrate_s"), j["threads"]
                 );
             }
-            _ => println!("\n(cv2 comparison skipped: /usr/bin/python3 with python3-opencv not available)"),
+            _ => println!(
+                "\n(cv2 comparison skipped: /usr/bin/python3 with python3-opencv not available)"
+            ),
         }
     } else {
-        println!("\n(opencv-left comparison skipped: {} is absent)", left.display());
+        println!(
+            "\n(opencv-left comparison skipped: {} is absent)",
+            left.display()
+        );
     }
 
     if !quick {
@@ -107,7 +131,12 @@ fn main() {
         cam.cx = 3001.5;
         cam.cy = 1998.0;
         cam.image_size = [6000, 4000];
-        let cfg = CheckerConfig { camera: cam, views: 20, blur_px: 1.5, ..CheckerConfig::default() };
+        let cfg = CheckerConfig {
+            camera: cam,
+            views: 20,
+            blur_px: 1.5,
+            ..CheckerConfig::default()
+        };
         let d = tmp.path().join("24mp");
         let t0 = Instant::now();
         let truth = generate(&cfg, &d, true).unwrap().truth.intrinsics;
@@ -120,7 +149,12 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|");
         println!(
             "| {} | {:.2} | {:.2} | {total:.2} | {:+.3} | {:+.2} | {:.3} | |",
-            r.calibration.used.len(), r.detection_s, r.calibration_s, 100.0 * (c.fx / truth.fx - 1.0), c.cx - truth.cx, r.calibration.rms_px
+            r.calibration.used.len(),
+            r.detection_s,
+            r.calibration_s,
+            100.0 * (c.fx / truth.fx - 1.0),
+            c.cx - truth.cx,
+            r.calibration.rms_px
         );
     }
 }

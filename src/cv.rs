@@ -60,9 +60,17 @@ fn corner_spacing(c: &[Vector2<f64>], p: Pattern) -> f64 {
     best
 }
 
-fn refine(full: &Mat, corners: &mut Vector<Point2f>, spacing: f64) -> Result<()> {
-    // Half-window about a third of a square, within [3, 25] px.
-    let w = (spacing / 3.0).clamp(3.0, 25.0).round() as i32;
+/// The cornerSubPix half-window: a third of the smallest corner spacing within [3, 25] px, unless
+/// given. A fixed 11 (OpenCV's samples) reaches past the neighbouring corners on steep views.
+fn refine(
+    full: &Mat,
+    corners: &mut Vector<Point2f>,
+    spacing: f64,
+    window: Option<u32>,
+) -> Result<()> {
+    let w = window
+        .map(|w| w as i32)
+        .unwrap_or_else(|| (spacing / 3.0).clamp(3.0, 25.0).round() as i32);
     let crit = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 60, 1e-4)
         .map_err(|e| cv("criteria", e))?;
     imgproc::corner_sub_pix(full, corners, Size::new(w, w), Size::new(-1, -1), crit)
@@ -86,6 +94,7 @@ pub fn detect(
     img: &Gray8,
     pattern: Pattern,
     detector: Detector,
+    window: Option<u32>,
 ) -> Result<Option<Vec<Vector2<f64>>>> {
     let full = mat_of(img)?;
     let size = Size::new(pattern.cols as i32, pattern.rows as i32);
@@ -114,7 +123,7 @@ pub fn detect(
     let approx = to_rust(&corners, s);
     if detector == Detector::Classic || s < 1.0 {
         let mut c = to_cv(&approx);
-        refine(&full, &mut c, corner_spacing(&approx, pattern))?;
+        refine(&full, &mut c, corner_spacing(&approx, pattern), window)?;
         return Ok(Some(to_rust(&c, 1.0)));
     }
     Ok(Some(approx))
@@ -365,8 +374,9 @@ impl crate::calibration::run::Detect for OpenCvDetect {
         img: &Gray8,
         pattern: Pattern,
         detector: Detector,
+        window: Option<u32>,
     ) -> Result<Option<Vec<Vector2<f64>>>> {
-        detect(img, pattern, detector)
+        detect(img, pattern, detector, window)
     }
 
     fn guess_pattern(&self, img: &Gray8) -> Result<Option<Pattern>> {

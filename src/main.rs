@@ -221,6 +221,9 @@ struct CalibrateArgs {
     /// or gives a view whose error stands out; or classic, sb, both.
     #[arg(long, value_enum, default_value = "auto")]
     detector: DetectorArg,
+    /// cornerSubPix half-window in px (default: a third of the corner spacing, 3 to 25).
+    #[arg(long)]
+    subpix_window: Option<u32>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -396,6 +399,7 @@ fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
         out: a.out,
         plots: a.plots,
         detector,
+        subpix_window: a.subpix_window,
         quiet,
     };
     let r = run::run(&opts, &workbench::cv::OpenCvDetect, &workbench::cv::OpenCv)?;

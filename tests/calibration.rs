@@ -225,6 +225,7 @@ mod with_opencv {
             out: Some(out.join("intrinsics.json")),
             plots: None,
             detector: DetectorChoice::Auto,
+            subpix_window: None,
             quiet: true,
         }
     }

@@ -428,6 +428,8 @@ pub struct Calibration {
     pub used: Vec<(View, Pose, f64)>,
     /// Views dropped as outliers, with the RMS that condemned them.
     pub rejected: Vec<(View, f64, String)>,
+    /// The per-view RMS above which a view counts as an outlier (px), from the rejection rounds.
+    pub outlier_limit_px: f64,
     pub cross_validation: Vec<CrossValidation>,
     pub notes: Vec<String>,
     pub warnings: Vec<String>,
@@ -453,6 +455,7 @@ pub fn calibrate(
     let mut active = views;
     let mut rejected: Vec<(View, f64, String)> = vec![];
     let model_fixed = DistortionModel::K1K2P1P2;
+    let mut limit_used = f64::NAN;
     // Outlier views, judged with the simpler model (up to a fifth of the views, at most 3 rounds).
     for _ in 0..3 {
         let refs: Vec<&[Vector2<f64>]> = active.iter().map(|v| v.corners.as_slice()).collect();
@@ -463,6 +466,14 @@ pub fn calibrate(
             .map(|(v, p)| rms(&view_residuals(&sol.camera, p, &v.corners, object)))
             .collect();
         let out = outlier_views(&per_view);
+        {
+            let med = median(&per_view);
+            let mad =
+                median(&per_view.iter().map(|e| (e - med).abs()).collect::<Vec<_>>()) * 1.4826;
+            if limit_used.is_nan() || !out.is_empty() {
+                limit_used = outlier_limit(med, mad);
+            }
+        }
         let budget = (active.len() + rejected.len()) / 5;
         if out.is_empty()
             || rejected.len() + out.len() > budget
@@ -567,6 +578,7 @@ pub fn calibrate(
         std,
         used,
         rejected,
+        outlier_limit_px: limit_used,
         cross_validation: cvs,
         notes,
         warnings,

@@ -1,7 +1,7 @@
 //! Calibration figures, drawn with the shared [`crate::plot`] module: per-view reprojection error,
 //! the corner residual scatter, and the corner coverage of the frame.
 
-use super::{coverage, median, outlier_limit, view_residuals, Calibration};
+use super::{coverage, view_residuals, Calibration};
 use crate::error::Result;
 use crate::plot::{Layer, Plot, BLACK_LINE, BLUE, GREY, VERMILLION};
 use nalgebra::Vector3;
@@ -42,8 +42,7 @@ pub fn per_view_errors(cal: &Calibration) -> Plot {
     );
     rows.sort_by(|a, b| a.0.cmp(&b.0));
     let all: Vec<f64> = rows.iter().map(|r| r.1).collect();
-    let med = median(&all);
-    let mad = median(&all.iter().map(|e| (e - med).abs()).collect::<Vec<_>>()) * 1.4826;
+    let limit = cal.outlier_limit_px;
     let mut p = Plot::new(
         &format!(
             "Reprojection error per view (overall RMS {:.3} px)",
@@ -54,7 +53,10 @@ pub fn per_view_errors(cal: &Calibration) -> Plot {
     );
     p.x_categories = Some(rows.iter().map(|r| short(&r.0)).collect());
     p.x_range = Some((-0.7, rows.len() as f64 - 0.3));
-    let top = all.iter().cloned().fold(outlier_limit(med, mad), f64::max);
+    let top = all
+        .iter()
+        .cloned()
+        .fold(if limit.is_finite() { limit } else { 0.0 }, f64::max);
     p.y_range = Some((0.0, 1.25 * top));
     p.layers.push(Layer::Bars {
         x: (0..rows.len()).map(|i| i as f64).collect(),
@@ -71,12 +73,14 @@ pub fn per_view_errors(cal: &Calibration) -> Plot {
         dashed: false,
         label: Some("overall RMS (used views)".into()),
     });
-    p.layers.push(Layer::HLine {
-        y: outlier_limit(med, mad),
-        color: VERMILLION,
-        dashed: true,
-        label: Some("outlier limit".into()),
-    });
+    if limit.is_finite() {
+        p.layers.push(Layer::HLine {
+            y: limit,
+            color: VERMILLION,
+            dashed: true,
+            label: Some("outlier limit".into()),
+        });
+    }
     if !cal.rejected.is_empty() {
         // A legend entry for the rejected colour.
         p.layers.push(Layer::Points {

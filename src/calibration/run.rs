@@ -21,6 +21,8 @@ pub struct Options {
     /// Plot folder (default `<out's folder>/plots`).
     pub plots: Option<PathBuf>,
     pub detector: DetectorChoice,
+    /// cornerSubPix half-window (px); default: a third of the corner spacing, within [3, 25].
+    pub subpix_window: Option<u32>,
     pub quiet: bool,
 }
 
@@ -48,6 +50,7 @@ pub trait Detect: Sync {
         img: &Gray8,
         pattern: Pattern,
         detector: Detector,
+        window: Option<u32>,
     ) -> Result<Option<Vec<Vector2<f64>>>>;
     fn guess_pattern(&self, img: &Gray8) -> Result<Option<Pattern>>;
     /// YAML text of the calibration in OpenCV FileStorage format.
@@ -163,7 +166,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         let res: Vec<(usize, Result<Option<Vec<Vector2<f64>>>>)> = todo
             .par_iter()
             .map(|&i| {
-                let r = detect.detect(&images[i].1, pattern, which);
+                let r = detect.detect(&images[i].1, pattern, which, opts.subpix_window);
                 pb.inc(1);
                 (i, r)
             })
