@@ -175,6 +175,36 @@ fn camera_mats(cam: &Camera) -> Result<(Mat, Mat)> {
     Ok((k, dist))
 }
 
+/// A [`Camera`] from OpenCV's camera matrix and distortion vector (missing coefficients are 0).
+fn camera_from_mats(k: &Mat, dist: &Mat, image_size: [u32; 2]) -> Result<Camera> {
+    let at = |r: i32, c: i32| {
+        k.at_2d::<f64>(r, c)
+            .copied()
+            .map_err(|e| cv("camera matrix", e))
+    };
+    let d = |i: i32| -> Result<f64> {
+        if (i as usize) < dist.total() {
+            dist.at::<f64>(i).copied().map_err(|e| cv("distortion", e))
+        } else {
+            Ok(0.0)
+        }
+    };
+    Ok(Camera {
+        fx: at(0, 0)?,
+        fy: at(1, 1)?,
+        cx: at(0, 2)?,
+        cy: at(1, 2)?,
+        distortion: Distortion {
+            k1: d(0)?,
+            k2: d(1)?,
+            p1: d(2)?,
+            p2: d(3)?,
+            k3: d(4)?,
+        },
+        image_size,
+    })
+}
+
 fn vec3_of(m: &Mat) -> Result<Vector3<f64>> {
     let v: Vec<f64> = (0..3)
         .map(|i| m.at::<f64>(i).copied())
@@ -225,32 +255,7 @@ impl Backend for OpenCv {
             &mut pve, flags, crit,
         )
         .map_err(|e| cv("calibrateCamera", e))?;
-        let at = |r: i32, c: i32| {
-            k.at_2d::<f64>(r, c)
-                .copied()
-                .map_err(|e| cv("camera matrix", e))
-        };
-        let d = |i: i32| -> Result<f64> {
-            if (i as usize) < dist.total() {
-                dist.at::<f64>(i).copied().map_err(|e| cv("distortion", e))
-            } else {
-                Ok(0.0)
-            }
-        };
-        let camera = Camera {
-            fx: at(0, 0)?,
-            fy: at(1, 1)?,
-            cx: at(0, 2)?,
-            cy: at(1, 2)?,
-            distortion: Distortion {
-                k1: d(0)?,
-                k2: d(1)?,
-                p1: d(2)?,
-                p2: d(3)?,
-                k3: d(4)?,
-            },
-            image_size,
-        };
+        let camera = camera_from_mats(&k, &dist, image_size)?;
         let poses = rvecs
             .iter()
             .zip(tvecs.iter())
@@ -343,26 +348,7 @@ pub fn read_filestorage_yaml(text: &str) -> Result<Camera> {
     let h = node("image_height")?
         .to_i32()
         .map_err(|e| cv("FileStorage", e))?;
-    let at = |r: i32, c: i32| {
-        k.at_2d::<f64>(r, c)
-            .copied()
-            .map_err(|e| cv("camera matrix", e))
-    };
-    let di = |i: i32| d.at::<f64>(i).copied().map_err(|e| cv("distortion", e));
-    Ok(Camera {
-        fx: at(0, 0)?,
-        fy: at(1, 1)?,
-        cx: at(0, 2)?,
-        cy: at(1, 2)?,
-        distortion: Distortion {
-            k1: di(0)?,
-            k2: di(1)?,
-            p1: di(2)?,
-            p2: di(3)?,
-            k3: di(4)?,
-        },
-        image_size: [w as u32, h as u32],
-    })
+    camera_from_mats(&k, &d, [w as u32, h as u32])
 }
 
 /// OpenCV's detectors for [`crate::calibration::run`].

@@ -259,20 +259,8 @@ impl Plot {
                     dashed,
                     label,
                 } => {
-                    let style = color.stroke_width(*width);
-                    let s = if *dashed {
-                        chart.draw_series(DashedLineSeries::new(xy.iter().copied(), 8, 5, style))
-                    } else {
-                        chart.draw_series(LineSeries::new(xy.iter().copied(), style))
-                    }
-                    .map_err(|x| e(&x))?;
-                    if let Some(l) = label {
-                        has_legend = true;
-                        let c = *color;
-                        s.label(l).legend(move |(x, y)| {
-                            PathElement::new([(x, y), (x + 20, y)], c.stroke_width(2))
-                        });
-                    }
+                    has_legend |=
+                        line(&mut chart, xy, *color, *width, *dashed, label).map_err(|x| e(&x))?;
                 }
                 Layer::HLine {
                     y,
@@ -281,20 +269,8 @@ impl Plot {
                     label,
                 } => {
                     let xy = [(x0, *y), (x1, *y)];
-                    let style = color.stroke_width(2);
-                    let s = if *dashed {
-                        chart.draw_series(DashedLineSeries::new(xy, 8, 5, style))
-                    } else {
-                        chart.draw_series(LineSeries::new(xy, style))
-                    }
-                    .map_err(|x| e(&x))?;
-                    if let Some(l) = label {
-                        has_legend = true;
-                        let c = *color;
-                        s.label(l).legend(move |(x, y)| {
-                            PathElement::new([(x, y), (x + 20, y)], c.stroke_width(2))
-                        });
-                    }
+                    has_legend |=
+                        line(&mut chart, &xy, *color, 2, *dashed, label).map_err(|x| e(&x))?;
                 }
             }
         }
@@ -347,6 +323,32 @@ impl Plot {
         crate::output::write_bytes(&svg, text.as_bytes())?;
         Ok((png, svg))
     }
+}
+
+/// Draw a polyline, solid or dashed, with an optional legend entry; says whether it added one.
+fn line<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    xy: &[(f64, f64)],
+    color: RGBColor,
+    width: u32,
+    dashed: bool,
+    label: &Option<String>,
+) -> Result<bool, DrawingAreaErrorKind<DB::ErrorType>> {
+    let style = color.stroke_width(width);
+    let s = if dashed {
+        chart.draw_series(DashedLineSeries::new(xy.iter().copied(), 8, 5, style))?
+    } else {
+        chart.draw_series(LineSeries::new(xy.iter().copied(), style))?
+    };
+    if let Some(l) = label {
+        s.label(l)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2)));
+    }
+    Ok(label.is_some())
 }
 
 /// Tick label: up to 4 significant digits, no trailing zeros.
