@@ -18,6 +18,7 @@ pub mod photo;
 pub mod plot;
 pub mod progress;
 pub mod session;
+pub mod silhouette;
 pub mod specular;
 pub mod sphere;
 pub mod synth;

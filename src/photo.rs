@@ -301,3 +301,86 @@ pub fn load_gray8(path: &Path) -> Result<Gray8> {
         data: g.into_raw(),
     })
 }
+
+/// A linear RGB image (full scale 1), with which pixels were clipped at full scale.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearRgb {
+    pub width: u32,
+    pub height: u32,
+    /// Interleaved RGB, row-major.
+    pub data: Vec<f32>,
+    /// One flag a pixel: any channel at the top code value (saturated).
+    pub saturated: Vec<bool>,
+    pub bits: u8,
+}
+
+impl LinearRgb {
+    /// Rec. 709 luminance of a pixel.
+    pub fn luminance(&self, x: u32, y: u32) -> f32 {
+        let i = 3 * (y as usize * self.width as usize + x as usize);
+        0.2126 * self.data[i] + 0.7152 * self.data[i + 1] + 0.0722 * self.data[i + 2]
+    }
+}
+
+/// Decode a photo to linear RGB: 16-bit (and float) values are taken as linear, 8-bit values as
+/// sRGB unless `linear` says otherwise. EXIF orientation is applied.
+pub fn load_linear_rgb(path: &Path, linear: Option<bool>) -> Result<LinearRgb> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    if reader.format().is_none() {
+        return Err(Error::invalid(path, "not a JPEG, PNG or TIFF image"));
+    }
+    let mut dec = reader.into_decoder().map_err(|e| image_err(path, e))?;
+    let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
+    let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
+    img.apply_orientation(orientation);
+    let bits = (img.color().bytes_per_pixel() / img.color().channel_count() * 8) as u8;
+    let (width, height) = (img.width(), img.height());
+    let (data, saturated) = if bits == 8 {
+        let lin = linear.unwrap_or(false);
+        let table: Vec<f32> = (0..256)
+            .map(|v| {
+                if lin {
+                    v as f32 / 255.0
+                } else {
+                    srgb_decode(v as f64 / 255.0) as f32
+                }
+            })
+            .collect();
+        let rgb = img.to_rgb8();
+        let sat = rgb.pixels().map(|p| p.0.contains(&255)).collect();
+        (
+            rgb.into_raw()
+                .into_iter()
+                .map(|v| table[v as usize])
+                .collect(),
+            sat,
+        )
+    } else if bits == 16 {
+        let rgb = img.to_rgb16();
+        let sat = rgb.pixels().map(|p| p.0.contains(&65535)).collect();
+        let dec = |v: u16| {
+            let x = v as f64 / 65535.0;
+            (if linear == Some(false) {
+                srgb_decode(x)
+            } else {
+                x
+            }) as f32
+        };
+        (rgb.into_raw().into_iter().map(dec).collect(), sat)
+    } else {
+        let rgb = img.to_rgb32f();
+        let sat = vec![false; (width * height) as usize];
+        (rgb.into_raw(), sat)
+    };
+    Ok(LinearRgb {
+        width,
+        height,
+        data,
+        saturated,
+        bits,
+    })
+}

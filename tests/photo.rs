@@ -69,3 +69,28 @@ fn bad_files_are_named() {
         .to_string();
     assert!(e.contains("missing.png: No such file"), "{e}");
 }
+
+#[test]
+fn linear_loading_decodes_srgb_and_flags_saturation() {
+    let dir = tempfile::tempdir().unwrap();
+    // 8-bit sRGB JPEG-free path: an 8-bit PNG with codes 0, 128, 255.
+    let p = dir.path().join("s.png");
+    let data: Vec<u8> = [0u8, 128, 255].iter().flat_map(|&v| [v, v, v]).collect();
+    workbench::photo::write_8bit(&p, 3, 1, 3, &data, 0, None).unwrap();
+    let img = workbench::photo::load_linear_rgb(&p, None).unwrap();
+    assert_eq!(img.bits, 8);
+    let expect = workbench::photo::srgb_decode(128.0 / 255.0) as f32;
+    assert!((img.data[3] - expect).abs() < 1e-6 && img.data[0] == 0.0 && img.data[6] == 1.0);
+    assert_eq!(img.saturated, [false, false, true]);
+    // Declared linear: no transfer curve.
+    let img = workbench::photo::load_linear_rgb(&p, Some(true)).unwrap();
+    assert!((img.data[3] - 128.0 / 255.0).abs() < 1e-6);
+    // 16-bit: linear by default.
+    let q = dir.path().join("l.png");
+    workbench::photo::write_png16_rgb(&q, 2, 1, &[0, 0, 0, 32768, 65535, 65535]).unwrap();
+    let img = workbench::photo::load_linear_rgb(&q, None).unwrap();
+    assert_eq!(img.bits, 16);
+    assert!((img.data[3] - 0.5).abs() < 1e-4 && img.data[5] == 1.0);
+    assert_eq!(img.saturated, [false, true]);
+    assert!((img.luminance(1, 0) - (0.2126 * 0.5 + 0.7152 + 0.0722)).abs() < 1e-4);
+}
