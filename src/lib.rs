@@ -4,6 +4,9 @@
 //! Conventions: millimetres; radians inside (degrees only in human-facing output); the OpenCV
 //! camera frame (x right, y down, z forward); light and view vectors point away from the surface.
 
+// `!(x > 0.0)` is how the argument checks reject NaN along with the out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod calibration;
 pub mod camera;
 pub mod cdrf;

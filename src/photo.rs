@@ -337,7 +337,7 @@ pub fn load_linear_rgb(path: &Path, linear: Option<bool>) -> Result<LinearRgb> {
     let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
     let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
     img.apply_orientation(orientation);
-    let bits = (img.color().bytes_per_pixel() / img.color().channel_count() * 8) as u8;
+    let bits = img.color().bytes_per_pixel() / img.color().channel_count() * 8;
     let (width, height) = (img.width(), img.height());
     let (data, saturated) = if bits == 8 {
         let lin = linear.unwrap_or(false);

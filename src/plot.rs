@@ -358,7 +358,7 @@ fn plotters_number(v: f64) -> String {
         return "0".into();
     }
     let a = v.abs();
-    let s = if a >= 1e5 || a < 1e-3 {
+    let s = if !(1e-3..1e5).contains(&a) {
         format!("{v:.2e}")
     } else {
         let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;

@@ -165,7 +165,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
         let (width, height) = dec.dimensions();
         let ct = dec.color_type();
         let channels = ct.channel_count();
-        let bits = (ct.bytes_per_pixel() / channels * 8) as u8;
+        let bits = ct.bytes_per_pixel() / channels * 8;
         let (exposure, exposure_source) = match im.exposure {
             Some(e) => (Some(e), Some("session.json")),
             None => match crate::photo::ExifInfo::read(&p)? {

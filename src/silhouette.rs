@@ -314,6 +314,6 @@ pub fn blobs(mask: &[bool], width: u32, height: u32) -> Vec<Blob> {
             extent,
         });
     }
-    out.sort_by(|a, b| b.area.cmp(&a.area));
+    out.sort_by_key(|b| std::cmp::Reverse(b.area));
     out
 }

@@ -57,6 +57,11 @@ pub trait Detect: Sync {
     fn yaml(&self, cam: &crate::camera::Camera) -> Result<String>;
 }
 
+/// A view's corners, when a detector found the board.
+type Corners = Option<Vec<Vector2<f64>>>;
+/// A decoded image with its EXIF, or why it could not be read.
+type Loaded = Result<(Gray8, Option<ExifInfo>)>;
+
 const IMAGE_EXTENSIONS: [&str; 5] = ["jpg", "jpeg", "png", "tif", "tiff"];
 
 /// The image files of a folder (not recursive), sorted by name.
@@ -99,10 +104,10 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         ));
     }
     let pb = crate::progress::bar(files.len() as u64, "reading", opts.quiet);
-    let loaded: Vec<(PathBuf, Result<(Gray8, Option<ExifInfo>)>)> = files
+    let loaded: Vec<(PathBuf, Loaded)> = files
         .par_iter()
         .map(|p| {
-            let r = photo::load_gray8(p).and_then(|g| Ok((g, ExifInfo::read(p).unwrap_or(None))));
+            let r = photo::load_gray8(p).map(|g| (g, ExifInfo::read(p).unwrap_or(None)));
             pb.inc(1);
             (p.clone(), r)
         })
@@ -151,7 +156,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
     let object = pattern.object_points(opts.square_mm);
     // Detections per image: [classic, sector-based], each not run (None), no board (Some(None))
     // or corners.
-    type Found = Option<Option<Vec<Vector2<f64>>>>;
+    type Found = Option<Corners>;
     let mut found: Vec<[Found; 2]> = vec![[None, None]; images.len()];
     let mut errors: Vec<Option<String>> = vec![None; images.len()];
     let run_pass = |which: Detector,
@@ -163,7 +168,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             &format!("{} detector", which.name()),
             opts.quiet,
         );
-        let res: Vec<(usize, Result<Option<Vec<Vector2<f64>>>>)> = todo
+        let res: Vec<(usize, Result<Corners>)> = todo
             .par_iter()
             .map(|&i| {
                 let r = detect.detect(&images[i].1, pattern, which, opts.subpix_window);
@@ -234,7 +239,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         runs(Detector::Classic),
         runs(Detector::SectorBased)
     );
-    let mut candidates: Vec<(String, [Option<Vec<Vector2<f64>>>; 2])> = vec![];
+    let mut candidates: Vec<(String, [Corners; 2])> = vec![];
     for (i, (f, _, _)) in images.iter().enumerate() {
         let both = [
             corners_of(&found[i], Detector::Classic),
