@@ -166,3 +166,61 @@ fn bad_input_is_one_clear_line() {
         "nope: No such file",
     );
 }
+
+#[cfg(feature = "opencv")]
+#[test]
+fn calibrate_a_synthetic_folder_and_refuse_an_empty_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = dir.path().join("c");
+    let c = c.to_str().unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "checkerboard",
+        "--out",
+        c,
+        "--size",
+        "640x480",
+        "--fx",
+        "700",
+        "--views",
+        "12",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, stdout, err) = wb(&["--quiet", "calibrate", c, "--square", "25mm"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        stdout.contains("pattern  9x6 inner corners") && stdout.contains("12 used"),
+        "{stdout}"
+    );
+    for f in [
+        "intrinsics.json",
+        "intrinsics.yml",
+        "plots/calibration-views.png",
+        "plots/calibration-coverage.svg",
+    ] {
+        assert!(Path::new(c).join(f).is_file(), "{f}");
+    }
+    // The session check reads the calibration it wrote.
+    let j: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(c).join("intrinsics.json")).unwrap(),
+    )
+    .unwrap();
+    assert!((j["fx"].as_f64().unwrap() / 700.0 - 1.0).abs() < 2e-3);
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    assert_clean_failure(
+        &["calibrate", empty.to_str().unwrap()],
+        "no JPEG, PNG or TIFF images",
+    );
+    assert_clean_failure(&["calibrate", c, "--pattern", "9by6"], "expected COLSxROWS");
+    assert_clean_failure(
+        &["calibrate", c, "--square=-3mm"],
+        "expected a positive size",
+    );
+    assert_clean_failure(
+        &["calibrate", c, "--square", "0mm"],
+        "expected a positive size",
+    );
+}

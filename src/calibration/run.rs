@@ -300,7 +300,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             .iter()
             .map(|(f, _, e)| (f.clone(), e.clone()))
             .collect::<Vec<_>>(),
-        &cal,
+        cal.camera.fx,
         size,
     );
     cal.warnings.extend(
@@ -384,7 +384,7 @@ fn no_view(dir: &Path, read: usize, why: &[(String, String)]) -> Error {
 /// the lens's 35 mm equivalent focal length. Lines starting "warning: " are warnings.
 pub fn exif_checks(
     exif: &[(String, Option<ExifInfo>)],
-    cal: &Calibration,
+    fitted_fx: f64,
     size: [u32; 2],
 ) -> Vec<String> {
     let mut notes = vec![];
@@ -422,11 +422,11 @@ pub fn exif_checks(
     match with.iter().find_map(|e| e.focal_length_35mm) {
         Some(f35) => {
             let expected = photo::fx_from_35mm(f35 as f64, size);
-            let ratio = cal.camera.fx / expected;
+            let ratio = fitted_fx / expected;
             let line = format!(
                 "lens: {:.1} mm ({f35} mm equivalent) implies fx ≈ {expected:.0} px; fitted fx = {:.1} px ({:+.1}%)",
                 with[0].focal_length_mm,
-                cal.camera.fx,
+                fitted_fx,
                 100.0 * (ratio - 1.0)
             );
             if (ratio - 1.0).abs() > 0.10 {
@@ -441,4 +441,63 @@ pub fn exif_checks(
         )),
     }
     notes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn exif(model: &str, focal: f64, f35: u32) -> Option<ExifInfo> {
+        Some(ExifInfo::for_exposure(1.0, "Maker", model, focal, f35))
+    }
+
+    #[test]
+    fn exif_sanity_checks() {
+        // 1280×960 and a 35 mm equivalent of 50 mm: fx ≈ 50 · 1600 / 43.27 = 1849 px.
+        let size = [1280, 960];
+        let same = vec![
+            ("a".to_string(), exif("X1", 33.0, 50)),
+            ("b".to_string(), exif("X1", 33.0, 50)),
+        ];
+        let notes = exif_checks(&same, 1849.0, size);
+        assert!(
+            notes.iter().all(|n| !n.starts_with("warning: ")),
+            "{notes:?}"
+        );
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.starts_with("lens: 33.0 mm (50 mm equivalent)")),
+            "{notes:?}"
+        );
+        // fx 15% off the lens: warned.
+        let notes = exif_checks(&same, 1849.0 * 1.15, size);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.starts_with("warning: lens:") && n.contains("+15.0%")),
+            "{notes:?}"
+        );
+        // Two cameras and two focal lengths: both warned.
+        let mixed = vec![
+            ("a".to_string(), exif("X1", 33.0, 50)),
+            ("b".to_string(), exif("X2", 24.0, 36)),
+        ];
+        let notes = exif_checks(&mixed, 1849.0, size);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.contains("different cameras: Maker X1, Maker X2")),
+            "{notes:?}"
+        );
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.contains("different focal lengths: 24.0 mm, 33.0 mm")),
+            "{notes:?}"
+        );
+        // No EXIF at all: said, not guessed.
+        let none = vec![("a".to_string(), None)];
+        assert!(exif_checks(&none, 1849.0, size)[0].starts_with("no EXIF"));
+    }
 }
