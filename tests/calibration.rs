@@ -2,8 +2,8 @@
 //! whole `calibrate` pipeline against synthetic ground truth and OpenCV's real sample photos.
 
 mod common;
-use nalgebra::{Vector2, Vector3};
-use workbench::calibration::{self, project_with_jacobian, DistortionModel, Pattern, Pose};
+use nalgebra::Vector3;
+use workbench::calibration::{project_with_jacobian, Pose};
 use workbench::camera::{Camera, Distortion};
 
 fn camera() -> Camera {
@@ -127,9 +127,11 @@ fn projection_jacobian_matches_finite_differences() {
 #[cfg(feature = "opencv")]
 mod with_opencv {
     use super::*;
+    use nalgebra::Vector2;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     use workbench::calibration::run::{self, Options};
+    use workbench::calibration::{self, DistortionModel, Pattern};
     use workbench::calibration::{Backend, DetectorChoice, View};
     use workbench::cv::{OpenCv, OpenCvDetect};
 
