@@ -282,6 +282,16 @@ pub struct Gray8 {
 /// Decode any supported image (JPEG, PNG, TIFF; 8 or 16 bit) to 8-bit grey, with its EXIF
 /// orientation applied.
 pub fn load_gray8(path: &Path) -> Result<Gray8> {
+    let g = decode_oriented(path)?.to_luma8();
+    Ok(Gray8 {
+        width: g.width(),
+        height: g.height(),
+        data: g.into_raw(),
+    })
+}
+
+/// Decode a JPEG, PNG or TIFF file with its EXIF orientation applied.
+fn decode_oriented(path: &Path) -> Result<image::DynamicImage> {
     use image::ImageDecoder;
     let reader = image::ImageReader::open(path)
         .map_err(|e| Error::io(path, e))?
@@ -294,12 +304,7 @@ pub fn load_gray8(path: &Path) -> Result<Gray8> {
     let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
     let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
     img.apply_orientation(orientation);
-    let g = img.to_luma8();
-    Ok(Gray8 {
-        width: g.width(),
-        height: g.height(),
-        data: g.into_raw(),
-    })
+    Ok(img)
 }
 
 /// A linear RGB image (full scale 1), with which pixels were clipped at full scale.
@@ -325,18 +330,7 @@ impl LinearRgb {
 /// Decode a photo to linear RGB: 16-bit (and float) values are taken as linear, 8-bit values as
 /// sRGB unless `linear` says otherwise. EXIF orientation is applied.
 pub fn load_linear_rgb(path: &Path, linear: Option<bool>) -> Result<LinearRgb> {
-    use image::ImageDecoder;
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
-    if reader.format().is_none() {
-        return Err(Error::invalid(path, "not a JPEG, PNG or TIFF image"));
-    }
-    let mut dec = reader.into_decoder().map_err(|e| image_err(path, e))?;
-    let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
-    let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
-    img.apply_orientation(orientation);
+    let img = decode_oriented(path)?;
     let bits = img.color().bytes_per_pixel() / img.color().channel_count() * 8;
     let (width, height) = (img.width(), img.height());
     let (data, saturated) = if bits == 8 {
