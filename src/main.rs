@@ -30,11 +30,25 @@ enum Command {
     /// Calibrate the camera from a folder of chessboard photos (OpenCV).
     #[cfg(feature = "opencv")]
     Calibrate(CalibrateArgs),
+    /// Find the spheres, highlights and light direction of a session; write detections.json.
+    Detect(DetectArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
         session: PathBuf,
     },
+}
+
+#[derive(Args)]
+struct DetectArgs {
+    /// The session folder (or its session.json).
+    session: PathBuf,
+    /// Where to write detections.json (default: beside session.json).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Do not write the overlay pictures (overlays/<photo>.png beside detections.json).
+    #[arg(long)]
+    no_overlays: bool,
 }
 
 #[derive(Subcommand)]
@@ -467,6 +481,85 @@ fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
+    use workbench::detect::{self, Options};
+    let opts = Options {
+        session: a.session.clone(),
+        out: a.out.clone(),
+        overlays: !a.no_overlays,
+        quiet,
+    };
+    let d = detect::run(&opts)?;
+    println!("session  {} ({} camera)", d.session, d.projection);
+    let deg = |v: &[f64; 3]| {
+        let l = workbench::model::LightAngles::from_direction(&nalgebra::Vector3::from(*v));
+        format!(
+            "[{:+.4}, {:+.4}, {:+.4}] (az {:.2}°, el {:.2}°)",
+            v[0],
+            v[1],
+            v[2],
+            l.azimuth.to_degrees(),
+            l.elevation.to_degrees()
+        )
+    };
+    for im in &d.images {
+        for (k, s) in im.spheres.iter().enumerate() {
+            let light = match (&s.light_direction, &s.highlight, &s.no_highlight) {
+                (Some(l), Some(h), _) => format!(
+                    "light {} ± {:.3}°{}{}",
+                    deg(l),
+                    s.light_std_deg.unwrap_or(f64::NAN),
+                    match h.method {
+                        workbench::highlight::Method::LobeFit => " (lobe fit)",
+                        workbench::highlight::Method::SaturatedCentroid => " (saturated centroid)",
+                    },
+                    if h.outlier { " OUTLIER" } else { "" }
+                ),
+                (_, _, Some(why)) => format!("no highlight: {why}"),
+                _ => "no highlight".into(),
+            };
+            let e = &s.ellipse;
+            println!(
+                "image    {:<12} #{} r {} mm: centre ({:.2}, {:.2}) px, axes {:.2}×{:.2} px ± {:.3} px; {light}",
+                im.file,
+                k + 1,
+                s.radius_mm,
+                e.center_px[0],
+                e.center_px[1],
+                e.axes_px[0],
+                e.axes_px[1],
+                s.silhouette_std_px[2],
+            );
+        }
+        if d.light_direction.is_none() {
+            if let Some(l) = &im.light_direction {
+                println!(
+                    "light    {:<12} {} ± {:.3}°",
+                    im.file,
+                    deg(l),
+                    im.light_std_deg.unwrap_or(f64::NAN)
+                );
+            }
+        }
+    }
+    match (&d.light_direction, d.light) {
+        (Some(l), _) => println!(
+            "light    session {} ± {:.3}°",
+            deg(l),
+            d.light_std_deg.unwrap_or(f64::NAN)
+        ),
+        (None, workbench::session::LightMode::Shared) => {
+            println!("light    none: no usable highlight on any sphere")
+        }
+        (None, workbench::session::LightMode::PerImage) => {}
+    }
+    let out = a
+        .out
+        .unwrap_or_else(|| std::path::Path::new(&d.session).with_file_name("detections.json"));
+    println!("wrote    {} in {:.2} s", out.display(), d.seconds);
+    Ok(())
+}
+
 fn check(session: PathBuf) -> Result<()> {
     let r = workbench::session::inspect(&session)?;
     println!("session  {}", r.session_file.display());
@@ -542,6 +635,7 @@ fn main() {
     let res = match cli.command {
         Command::Synth(Synth::Session(a)) => synth_session(a, cli.quiet),
         Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
+        Command::Detect(a) => detect(a, cli.quiet),
         Command::Check { session } => check(session),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate(a, cli.quiet),

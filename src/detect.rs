@@ -1,0 +1,581 @@
+//! `workbench detect <session>/`: find every sphere of every photo, its highlight, and the light
+//! direction; write `detections.json` (schema `workbench.detections/1`) and an overlay per photo.
+//!
+//! Per photo: the background level and noise (median, MAD) → a mask of what is clearly brighter →
+//! connected blobs, of which the ones carrying at least 5% of the largest one's light are the
+//! spheres, left to right in the order `session.json` lists them → per sphere, edge points,
+//! RANSAC outline and edge-model refinement ([`crate::silhouette`]) → the highlight and its light
+//! ([`crate::highlight`]). Lights are combined per photo and, unless the session says
+//! `"light": "per-image"`, over the whole session ([`crate::highlight::combine`]).
+//! Photos are processed in parallel (rayon); detection uses no OpenCV.
+
+use crate::error::{Error, Result};
+use crate::highlight::{self, Highlight, Method};
+use crate::model::LightAngles;
+use crate::outline::{Outline, Projection};
+use crate::photo::{load_linear_rgb, LinearRgb};
+use crate::samples::{self, Counts};
+use crate::session::{self, LightMode, Session};
+use crate::silhouette::{self, blobs, Plane};
+use crate::sphere::EllipseJson;
+use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub const SCHEMA: &str = "workbench.detections/1";
+
+/// Floor on a single light estimate's uncertainty when combining (radians): the modelling error
+/// the per-fit statistics do not see.
+pub const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
+
+/// A fitted outline, as stored.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum OutlineJson {
+    /// Perspective: the tangent cone (unit axis toward the centre, half-angle).
+    Cone { axis: [f64; 3], half_angle_deg: f64 },
+    /// Orthographic: a circle in pixels.
+    Circle { center_px: [f64; 2], radius_px: f64 },
+}
+
+impl From<&Outline> for OutlineJson {
+    fn from(o: &Outline) -> Self {
+        match o {
+            Outline::Cone { axis, half_angle } => OutlineJson::Cone {
+                axis: [axis.x, axis.y, axis.z],
+                half_angle_deg: half_angle.to_degrees(),
+            },
+            Outline::Circle { center, radius } => OutlineJson::Circle {
+                center_px: [center.x, center.y],
+                radius_px: *radius,
+            },
+        }
+    }
+}
+
+impl OutlineJson {
+    pub fn outline(&self) -> Outline {
+        match *self {
+            OutlineJson::Cone {
+                axis,
+                half_angle_deg,
+            } => Outline::Cone {
+                axis: Vector3::from(axis).normalize(),
+                half_angle: half_angle_deg.to_radians(),
+            },
+            OutlineJson::Circle {
+                center_px,
+                radius_px,
+            } => Outline::Circle {
+                center: Vector2::from(center_px),
+                radius: radius_px,
+            },
+        }
+    }
+}
+
+/// The highlight of one sphere.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HighlightJson {
+    pub method: Method,
+    /// Fitted GGX roughness (lobe fit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<f64>,
+    pub saturated_px: usize,
+    /// Angular radius around the mirror direction whose pixels are flagged as highlight.
+    pub radius_deg: f64,
+    /// Left out of the combined light (more than 5σ from the others).
+    pub outlier: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SphereDetection {
+    pub radius_mm: f64,
+    /// Silhouette in ideal (undistorted pinhole) pixels.
+    pub ellipse: EllipseJson,
+    pub center_mm: Option<[f64; 3]>,
+    pub outline: OutlineJson,
+    /// 1-σ of the outline's centre (x, y) and radius, px.
+    pub silhouette_std_px: [f64; 3],
+    /// Fitted edge blur (Gaussian σ, px) beyond the pixel footprint.
+    pub silhouette_blur_px: f64,
+    /// Photos the silhouette was fitted over (more than 1: the sphere stayed put between them).
+    pub silhouette_photos: usize,
+    pub edge_points: usize,
+    pub edge_inliers: usize,
+    pub highlight_px: Option<[f64; 2]>,
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    pub highlight: Option<HighlightJson>,
+    /// Why no highlight was used, when none was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_highlight: Option<String>,
+    pub samples: Counts,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImageDetection {
+    pub file: String,
+    pub width: u32,
+    pub height: u32,
+    /// Relative exposure dividing the samples' radiance (null: unknown).
+    pub exposure: Option<f64>,
+    /// Combined over this photo's spheres.
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    pub spheres: Vec<SphereDetection>,
+    /// The overlay picture, relative to detections.json.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlay: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Detections {
+    pub schema: String,
+    /// The session file, as given.
+    pub session: String,
+    /// "perspective" (with intrinsics) or "orthographic" (none given).
+    pub projection: String,
+    pub light: LightMode,
+    /// Combined over the session (null under `"light": "per-image"` or without highlights).
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    /// Azimuth and elevation of the combined light (degrees; see `model::LightAngles`).
+    pub light_azimuth_deg: Option<f64>,
+    pub light_elevation_deg: Option<f64>,
+    pub images: Vec<ImageDetection>,
+    pub seconds: f64,
+}
+
+/// Everything found on one sphere, before serialisation.
+#[derive(Clone, Debug)]
+pub struct Found {
+    pub radius_mm: f64,
+    pub outline: Outline,
+    pub std_px: [f64; 3],
+    pub blur_px: f64,
+    /// Photos the outline was fitted over (more than one: a sphere that stayed put).
+    pub photos: usize,
+    /// Noise level of the photo (luminance units).
+    pub noise: f64,
+    pub edge_points: usize,
+    pub inlier_px: Vec<Vector2<f64>>,
+    pub highlight: std::result::Result<Highlight, String>,
+}
+
+/// Background level and noise of a photo: median and 1.4826·MAD of the luminance (sampled).
+fn background(lum: &Plane) -> (f64, f64) {
+    let step = (lum.data.len() / 200_000).max(1);
+    let mut v: Vec<f32> = lum.data.iter().step_by(step).cloned().collect();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let med = v[v.len() / 2] as f64;
+    let mut dev: Vec<f64> = v.iter().map(|&x| (x as f64 - med).abs()).collect();
+    dev.sort_by(|a, b| a.total_cmp(b));
+    (med, 1.4826 * dev[dev.len() / 2])
+}
+
+/// Luminance plane of a linear photo.
+pub fn luminance(img: &LinearRgb) -> Plane {
+    Plane {
+        width: img.width,
+        height: img.height,
+        data: img
+            .data
+            .chunks_exact(3)
+            .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+            .collect(),
+    }
+}
+
+/// Find the spheres of one photo (left to right; `radii` as listed in the session).
+pub fn find_spheres(
+    img: &LinearRgb,
+    proj: &Projection,
+    radii: &[f64],
+    path: &Path,
+) -> Result<Vec<Found>> {
+    let lum = luminance(img);
+    let (bg, noise) = background(&lum);
+    let mut top: Vec<f32> = lum
+        .data
+        .iter()
+        .step_by((lum.data.len() / 200_000).max(1))
+        .cloned()
+        .collect();
+    top.sort_by(|a, b| a.total_cmp(b));
+    let p999 = top[((top.len() as f64 * 0.999) as usize).min(top.len() - 1)] as f64;
+    let thr = bg + (8.0 * noise).max(0.03 * (p999 - bg));
+    let mask: Vec<bool> = lum.data.iter().map(|&v| v as f64 > thr).collect();
+    let excess: Vec<f32> = lum
+        .data
+        .iter()
+        .map(|&v| (v as f64 - bg).max(0.0) as f32)
+        .collect();
+    let all = blobs(&mask, img.width, img.height, Some(&excess));
+    let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
+    let mut found: Vec<_> = all
+        .into_iter()
+        .filter(|b| b.mass >= 0.05 * biggest && b.area >= 30)
+        .collect();
+    if found.len() != radii.len() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "found {} sphere(s), session.json lists {} for this photo",
+                found.len(),
+                radii.len()
+            ),
+        ));
+    }
+    if let Some(b) = found
+        .iter()
+        .find(|b| b.touches_border(img.width, img.height))
+    {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "a sphere touches the frame border near pixel ({:.0}, {:.0}): its silhouette is cut",
+                b.centroid.x, b.centroid.y
+            ),
+        ));
+    }
+    found.sort_by(|a, b| a.centroid.x.total_cmp(&b.centroid.x));
+    let mut out = vec![];
+    for (b, &radius_mm) in found.iter().zip(radii) {
+        let pad = b.extent.ceil() as u32 + 4;
+        let region = [
+            b.bbox[0].saturating_sub(pad),
+            b.bbox[1].saturating_sub(pad),
+            (b.bbox[2] + pad).min(img.width - 1),
+            (b.bbox[3] + pad).min(img.height - 1),
+        ];
+        let mut inside: Vec<f64> = (b.bbox[1]..=b.bbox[3])
+            .flat_map(|y| (b.bbox[0]..=b.bbox[2]).map(move |x| (x, y)))
+            .filter(|&(x, y)| mask[(y * img.width + x) as usize])
+            .map(|(x, y)| lum.at(x, y) as f64 - bg)
+            .collect();
+        inside.sort_by(|a, b| a.total_cmp(b));
+        let level = inside[inside.len() * 9 / 10];
+        let edges = silhouette::edge_points(&lum, region, (5.0 * noise).max(0.03 * level), proj);
+        let fail = |what: &str| {
+            Error::invalid(
+                path,
+                format!(
+                    "sphere {} of {} (r = {radius_mm} mm, near pixel ({:.0}, {:.0})): {what}",
+                    out.len() + 1,
+                    radii.len(),
+                    b.centroid.x,
+                    b.centroid.y
+                ),
+            )
+        };
+        let fit = silhouette::ransac(&edges, proj, (0.3 * b.extent, 2.5 * b.extent), 1.5, 800)
+            .ok_or_else(|| fail("no silhouette found among the edges"))?;
+        if fit.inliers.len() < 20 {
+            return Err(fail("too few silhouette edge points"));
+        }
+        let refined = silhouette::refine_repeated(
+            &[(&lum, Some(&img.saturated))],
+            proj,
+            &fit.outline,
+            std::env::var("INNER")
+                .map(|v| v.parse().unwrap())
+                .unwrap_or(4.0),
+            3.0,
+        )
+        .ok_or_else(|| fail("silhouette refinement failed"))?;
+        // The refinement may not wander off: it starts within a pixel of the edges.
+        let shift = fit.outline.distance_px(&refined.outline, proj);
+        let mut outline = if shift < 3.0 {
+            refined.outline
+        } else {
+            fit.outline
+        };
+        if let Ok(v) = std::env::var("FIXCIRCLE") {
+            let v: Vec<f64> = v.split(',').map(|t| t.parse().unwrap()).collect();
+            outline = Outline::Circle {
+                center: Vector2::new(v[0], v[1]),
+                radius: v[2],
+            };
+        }
+        let hl =
+            highlight::find(&lum, &img.saturated, proj, &outline, noise.max(1e-6)).map_err(|e| e.0);
+        out.push(Found {
+            radius_mm,
+            outline,
+            std_px: refined.std_px,
+            blur_px: refined.blur_px,
+            photos: 1,
+            noise: noise.max(1e-6),
+            edge_points: edges.len(),
+            inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
+            highlight: hl,
+        });
+    }
+    Ok(out)
+}
+
+/// Spheres that stayed put across the photos (same radii in every photo, outlines within 2 px):
+/// refit each outline over all photos at once. Each photo lights a different part of the rim, so
+/// the edge model's light-dependent errors average out (photometric-stereo sets). The highlights
+/// are then located again on the common outline.
+pub fn pool_static_spheres(per_image: &mut [(LinearRgb, Vec<Found>)], proj: &Projection) {
+    if per_image.len() < 2 {
+        return;
+    }
+    let radii = |fs: &[Found]| fs.iter().map(|f| f.radius_mm).collect::<Vec<_>>();
+    let first = radii(&per_image[0].1);
+    if per_image.iter().any(|(_, fs)| radii(fs) != first) {
+        return;
+    }
+    let lums: Vec<Plane> = per_image
+        .par_iter()
+        .map(|(img, _)| luminance(img))
+        .collect();
+    for j in 0..first.len() {
+        let outlines: Vec<Outline> = per_image.iter().map(|(_, fs)| fs[j].outline).collect();
+        let Some(medoid) = outlines.iter().min_by(|a, b| {
+            let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
+            let db: f64 = outlines.iter().map(|o| b.distance_px(o, proj)).sum();
+            da.total_cmp(&db)
+        }) else {
+            continue;
+        };
+        // Static when at least three quarters of the outlines agree within 2 px; the rest are
+        // failed fits of the same sphere and get the common outline too.
+        let agree: Vec<bool> = outlines
+            .iter()
+            .map(|o| o.distance_px(medoid, proj) <= 2.0)
+            .collect();
+        if 4 * agree.iter().filter(|&&a| a).count() < 3 * outlines.len() {
+            continue;
+        }
+        let images: Vec<(&Plane, Option<&[bool]>)> = lums
+            .iter()
+            .zip(per_image.iter())
+            .zip(&agree)
+            .filter(|(_, &a)| a)
+            .map(|((l, (img, _)), _)| (l, Some(img.saturated.as_slice())))
+            .collect();
+        let Some(joint) = silhouette::refine_repeated(&images, proj, medoid, 4.0, 3.0) else {
+            continue;
+        };
+        if joint.outline.distance_px(medoid, proj) > 2.0 {
+            continue;
+        }
+        let mut joint = joint;
+        if let Ok(v) = std::env::var("FIXCIRCLE") {
+            let v: Vec<f64> = v.split(',').map(|t| t.parse().unwrap()).collect();
+            joint.outline = Outline::Circle {
+                center: Vector2::new(v[0], v[1]),
+                radius: v[2],
+            };
+        }
+        let n = images.len();
+        per_image
+            .par_iter_mut()
+            .zip(&lums)
+            .for_each(|((img, fs), lum)| {
+                let f = &mut fs[j];
+                f.outline = joint.outline;
+                f.std_px = joint.std_px;
+                f.blur_px = joint.blur_px;
+                f.photos = n;
+                f.highlight = highlight::find(lum, &img.saturated, proj, &f.outline, f.noise)
+                    .map_err(|e| e.0);
+            });
+    }
+}
+
+fn arr3(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Options of `workbench detect`.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub session: PathBuf,
+    /// Where detections.json goes (default: beside session.json).
+    pub out: Option<PathBuf>,
+    /// Write overlay PNGs (into `overlays/` beside detections.json).
+    pub overlays: bool,
+    pub quiet: bool,
+}
+
+/// Run detection over a session.
+pub fn run(opts: &Options) -> Result<Detections> {
+    let t0 = std::time::Instant::now();
+    let report = session::inspect(&opts.session)?;
+    let (sess, _) = Session::load(&report.session_file)?;
+    let proj = match &report.camera {
+        Some(c) => Projection::Perspective(*c),
+        None => Projection::Orthographic,
+    };
+    let out = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
+    let pb = crate::progress::bar(report.images.len() as u64, "detect", opts.quiet);
+    let per_image: Vec<Result<(LinearRgb, Vec<Found>)>> = report
+        .images
+        .par_iter()
+        .zip(&sess.images)
+        .map(|(info, si)| {
+            let img = load_linear_rgb(&info.path, si.linear)?;
+            let f = find_spheres(&img, &proj, &info.radii_mm, &info.path)?;
+            pb.inc(1);
+            Ok((img, f))
+        })
+        .collect();
+    pb.finish_and_clear();
+    let mut per_image: Vec<(LinearRgb, Vec<Found>)> =
+        per_image.into_iter().collect::<Result<_>>()?;
+    pool_static_spheres(&mut per_image, &proj);
+    // Lights: per photo, then over the session.
+    let est = |f: &Found| f.highlight.as_ref().ok().map(|h| (h.light, h.cov));
+    let image_lights: Vec<Option<highlight::Combined>> = per_image
+        .iter()
+        .map(|(_, fs)| {
+            let e: Vec<_> = fs.iter().filter_map(est).collect();
+            highlight::combine(&e, LIGHT_FLOOR)
+        })
+        .collect();
+    let all: Vec<(usize, usize)> = per_image
+        .iter()
+        .enumerate()
+        .flat_map(|(i, (_, fs))| {
+            fs.iter()
+                .enumerate()
+                .filter(|(_, f)| f.highlight.is_ok())
+                .map(move |(j, _)| (i, j))
+        })
+        .collect();
+    let session_light = match sess.light {
+        LightMode::Shared => {
+            let e: Vec<_> = all
+                .iter()
+                .filter_map(|&(i, j)| est(&per_image[i].1[j]))
+                .collect();
+            highlight::combine(&e, LIGHT_FLOOR)
+        }
+        LightMode::PerImage => None,
+    };
+    let is_outlier = |i: usize, j: usize| -> bool {
+        match (&session_light, sess.light) {
+            (Some(c), LightMode::Shared) => all
+                .iter()
+                .position(|&p| p == (i, j))
+                .is_some_and(|k| c.outlier[k]),
+            _ => {
+                let k = per_image[i].1[..j]
+                    .iter()
+                    .filter(|f| f.highlight.is_ok())
+                    .count();
+                image_lights[i].as_ref().is_some_and(|c| c.outlier[k])
+            }
+        }
+    };
+    let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut images = vec![];
+    for (i, ((img, fs), info)) in per_image.iter().zip(&report.images).enumerate() {
+        let light_for_samples = match sess.light {
+            LightMode::Shared => session_light.as_ref().map(|c| c.light),
+            LightMode::PerImage => image_lights[i].as_ref().map(|c| c.light),
+        };
+        let spheres = fs
+            .iter()
+            .enumerate()
+            .map(|(j, f)| {
+                let hl = f.highlight.as_ref().ok();
+                let smp = samples::sphere_samples(
+                    img,
+                    info.exposure.unwrap_or(1.0),
+                    &proj,
+                    &f.outline,
+                    f.radius_mm,
+                    light_for_samples.as_ref(),
+                    hl.map(|h| h.radius),
+                );
+                SphereDetection {
+                    radius_mm: f.radius_mm,
+                    ellipse: f.outline.ellipse(&proj).map(EllipseJson::from).unwrap_or(
+                        EllipseJson {
+                            center_px: [f64::NAN; 2],
+                            axes_px: [f64::NAN; 2],
+                            angle_deg: f64::NAN,
+                        },
+                    ),
+                    center_mm: f.outline.center_mm(f.radius_mm).map(|c| arr3(&c)),
+                    outline: OutlineJson::from(&f.outline),
+                    silhouette_std_px: f.std_px,
+                    silhouette_blur_px: f.blur_px,
+                    silhouette_photos: f.photos,
+                    edge_points: f.edge_points,
+                    edge_inliers: f.inlier_px.len(),
+                    highlight_px: hl.map(|h| [h.px.x, h.px.y]),
+                    light_direction: hl.map(|h| arr3(&h.light)),
+                    light_std_deg: hl.map(|h| h.std().to_degrees()),
+                    highlight: hl.map(|h| HighlightJson {
+                        method: h.method,
+                        alpha: h.alpha,
+                        saturated_px: h.saturated,
+                        radius_deg: h.radius.to_degrees(),
+                        outlier: is_outlier(i, j),
+                    }),
+                    no_highlight: f.highlight.as_ref().err().cloned(),
+                    samples: samples::counts(&smp),
+                }
+            })
+            .collect();
+        let overlay = if opts.overlays {
+            let stem = Path::new(&info.file)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| format!("image{i}"));
+            let rel = format!("overlays/{stem}.png");
+            crate::overlay::write(
+                &out_dir.join(&rel),
+                img,
+                &proj,
+                fs,
+                light_for_samples.as_ref(),
+            )?;
+            Some(rel)
+        } else {
+            None
+        };
+        images.push(ImageDetection {
+            file: info.file.clone(),
+            width: img.width,
+            height: img.height,
+            exposure: info.exposure,
+            light_direction: image_lights[i].as_ref().map(|c| arr3(&c.light)),
+            light_std_deg: image_lights[i].as_ref().map(|c| c.std().to_degrees()),
+            spheres,
+            overlay,
+        });
+    }
+    let angles = session_light
+        .as_ref()
+        .map(|c| LightAngles::from_direction(&c.light));
+    let det = Detections {
+        schema: SCHEMA.into(),
+        session: report.session_file.display().to_string(),
+        projection: if proj.is_perspective() {
+            "perspective"
+        } else {
+            "orthographic"
+        }
+        .into(),
+        light: sess.light,
+        light_direction: session_light.as_ref().map(|c| arr3(&c.light)),
+        light_std_deg: session_light.as_ref().map(|c| c.std().to_degrees()),
+        light_azimuth_deg: angles.map(|a| a.azimuth.to_degrees()),
+        light_elevation_deg: angles.map(|a| a.elevation.to_degrees()),
+        images,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    crate::output::write_json(&out, &det)?;
+    Ok(det)
+}
