@@ -27,6 +27,10 @@ pub const SCHEMA: &str = "workbench.detections/1";
 
 /// Floor on a single light estimate's uncertainty when combining (radians): the modelling error
 /// the per-fit statistics do not see.
+/// The band of pixels the edge model fits: this far inside and outside the silhouette (px).
+pub const BAND_INNER_PX: f64 = 4.0;
+pub const BAND_OUTER_PX: f64 = 3.0;
+
 pub const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
 
 /// A fitted outline, as stored.
@@ -279,26 +283,17 @@ pub fn find_spheres(
             &[(&lum, Some(&img.saturated))],
             proj,
             &fit.outline,
-            std::env::var("INNER")
-                .map(|v| v.parse().unwrap())
-                .unwrap_or(4.0),
-            3.0,
+            BAND_INNER_PX,
+            BAND_OUTER_PX,
         )
         .ok_or_else(|| fail("silhouette refinement failed"))?;
         // The refinement may not wander off: it starts within a pixel of the edges.
         let shift = fit.outline.distance_px(&refined.outline, proj);
-        let mut outline = if shift < 3.0 {
+        let outline = if shift < 3.0 {
             refined.outline
         } else {
             fit.outline
         };
-        if let Ok(v) = std::env::var("FIXCIRCLE") {
-            let v: Vec<f64> = v.split(',').map(|t| t.parse().unwrap()).collect();
-            outline = Outline::Circle {
-                center: Vector2::new(v[0], v[1]),
-                radius: v[2],
-            };
-        }
         let hl =
             highlight::find(&lum, &img.saturated, proj, &outline, noise.max(1e-6)).map_err(|e| e.0);
         out.push(Found {
@@ -358,19 +353,13 @@ pub fn pool_static_spheres(per_image: &mut [(LinearRgb, Vec<Found>)], proj: &Pro
             .filter(|(_, &a)| a)
             .map(|((l, (img, _)), _)| (l, Some(img.saturated.as_slice())))
             .collect();
-        let Some(joint) = silhouette::refine_repeated(&images, proj, medoid, 4.0, 3.0) else {
+        let Some(joint) =
+            silhouette::refine_repeated(&images, proj, medoid, BAND_INNER_PX, BAND_OUTER_PX)
+        else {
             continue;
         };
         if joint.outline.distance_px(medoid, proj) > 2.0 {
             continue;
-        }
-        let mut joint = joint;
-        if let Ok(v) = std::env::var("FIXCIRCLE") {
-            let v: Vec<f64> = v.split(',').map(|t| t.parse().unwrap()).collect();
-            joint.outline = Outline::Circle {
-                center: Vector2::new(v[0], v[1]),
-                radius: v[2],
-            };
         }
         let n = images.len();
         per_image

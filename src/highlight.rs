@@ -8,11 +8,16 @@
 //! itself: the pixels around the peak are modelled as a smooth diffuse trend (a cubic in the
 //! image) plus A · fs(n, v, l; α) · (n·l), the GGX lobe of [`crate::specular`] with the pixel's
 //! own geometry, and Levenberg–Marquardt moves l (two angles) and α while the trend and A are
-//! solved in closed form (variable projection). Saturated pixels are left out of the fit; when
-//! too little of the lobe remains, the centroid of the saturated blob locates the peak instead.
+//! solved in closed form (variable projection). Saturated pixels are left out of the fit. A lobe
+//! narrower than a few pixels (α·R < 4 px) is not resolved by the pixels, and a clipped one has
+//! too little left around its clipped core: those are located by the intensity-weighted centroid
+//! of their excess over a local plane (fitted on a ring around them) — sub-pixel even for a blob
+//! of a few clipped pixels.
 //!
 //! Each estimate carries a covariance of the two light angles: from the fit's Jacobian (σ²(JᵀJ)⁻¹)
 //! or, for a centroid, from a quarter-pixel position error mapped through the reflection.
+//! An estimate is accepted only if the lobe stands out of the noise (6σ) and of the diffuse
+//! level (2%); otherwise the sphere is reported as having no usable highlight.
 
 use crate::outline::{reflect, Outline, Projection};
 use crate::silhouette::{blobs, Plane};
@@ -30,8 +35,11 @@ const RESOLVED_PX: f64 = 4.0;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
+    /// GGX lobe fitted to the highlight's pixels (a highlight resolved by the pixels).
     LobeFit,
-    SaturatedCentroid,
+    /// Intensity-weighted centroid of the excess over a local plane (a highlight a few pixels
+    /// wide, or clipped with too little of its lobe left).
+    Centroid,
 }
 
 /// A located highlight and the light it implies.
@@ -369,16 +377,13 @@ pub fn find(
         }
         (sw > 0.0).then(|| c0 + sp / sw)
     };
-    let centroid = |b: &crate::silhouette::Blob| -> Result<Highlight, NoHighlight> {
-        let mut c = Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y);
-        if std::env::var("WCENT").is_ok() {
-            let rw = (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0;
-            for _ in 0..3 {
-                c = weighted(c, rw).unwrap_or(c);
-            }
+    // The centroid method, from a start pixel and a window radius (px).
+    let centroid = |start: Vector2<f64>, rw: f64, clipped: usize| -> Result<Highlight, NoHighlight> {
+        let mut c = start;
+        for _ in 0..3 {
+            c = weighted(c, rw).unwrap_or(c);
         }
-        let l =
-            light_at(c).ok_or_else(|| NoHighlight("saturated blob outside the sphere".into()))?;
+        let l = light_at(c).ok_or_else(|| NoHighlight("highlight outside the sphere".into()))?;
         // A quarter-pixel position error, mapped through the reflection.
         let mut jm = Matrix3x2::zeros();
         for k in 0..2 {
@@ -386,7 +391,7 @@ pub fn find(
             d[k] = 0.5;
             let (a, b2) = (light_at(c + d), light_at(c - d));
             let (Some(a), Some(b2)) = (a, b2) else {
-                return Err(NoHighlight("saturated blob at the silhouette".into()));
+                return Err(NoHighlight("highlight at the silhouette".into()));
             };
             jm.set_column(k, &(a - b2));
         }
@@ -395,10 +400,10 @@ pub fn find(
             px: c,
             light: l,
             cov,
-            method: Method::SaturatedCentroid,
+            method: Method::Centroid,
             alpha: None,
-            saturated: b.area,
-            radius: (b.extent / r_px).asin().max(0.01) * 2.0 + 0.02,
+            saturated: clipped,
+            radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
         })
     };
     // Lobe fit in two passes: a 20° patch of half-vector angles, then one sized by the fitted α.
@@ -479,10 +484,17 @@ pub fn find(
     // A clipped highlight whose lobe spans only a few pixels is located better by the centroid
     // of its clipped blob than by a lobe fitted to the handful of pixels around it.
     let resolved = |h: &Highlight| h.alpha.is_some_and(|a| a * r_px >= RESOLVED_PX);
+    let blob_centroid = |b: &crate::silhouette::Blob| {
+        let c = Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y);
+        centroid(c, (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0, b.area)
+    };
     match (fitted, &sat_blob) {
-        (Some(h), Some(b)) if !resolved(&h) => centroid(b),
+        (Some(h), Some(b)) if !resolved(&h) => blob_centroid(b),
+        (Some(h), None) if !resolved(&h) => {
+            centroid(h.px, (3.0 * h.alpha.unwrap_or(0.0) * r_px).max(2.0) + 1.0, 0)
+        }
         (Some(h), _) => Ok(h),
-        (None, Some(b)) => centroid(b),
+        (None, Some(b)) => blob_centroid(b),
         (None, None) => Err(NoHighlight(format!(
             "no significant specular peak (largest local excess {excess:.3e}, noise {noise:.1e})"
         ))),

@@ -511,7 +511,7 @@ fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
                     s.light_std_deg.unwrap_or(f64::NAN),
                     match h.method {
                         workbench::highlight::Method::LobeFit => " (lobe fit)",
-                        workbench::highlight::Method::SaturatedCentroid => " (saturated centroid)",
+                        workbench::highlight::Method::Centroid => " (centroid)",
                     },
                     if h.outlier { " OUTLIER" } else { "" }
                 ),

@@ -307,14 +307,16 @@ pub struct Refined {
 }
 
 const SECTORS: usize = 48;
-const SUB: usize = 4;
+const SUBSAMPLES: usize = 2;
+const SUB: usize = SUBSAMPLES;
 /// Index of refraction of the limb's exit-transmission term (its shape near grazing changes
 /// little over 1.3–1.7).
 const LIMB_ETA: f64 = 1.44;
-/// Linear terms per sector: background, step, cos φ, the exit transmission T(φ) and T(φ)·cos φ.
+/// Linear terms per sector: background, step, cos φ, the exit transmission T(φ), T(φ)·cos φ, and
+/// a background ramp (distance outside the rim).
 /// Near the rim cos θ is linear in cos φ, so an opaque sphere's radiance is a + b·cos φ and a
 /// translucent one's T(φ)·(a + b·cos φ).
-const NBASE: usize = 5;
+const NBASE: usize = 6;
 /// Each base term also varies linearly with the angle along the rim within its sector (the
 /// brightness changes along the rim toward the terminator).
 const NLIN: usize = 2 * NBASE;
@@ -347,6 +349,21 @@ struct BandPixel {
 type Lin = nalgebra::SVector<f64, NLIN>;
 type LinM = nalgebra::SMatrix<f64, NLIN, NLIN>;
 
+/// Exit transmission T(φ) at cos φ = u for [`LIMB_ETA`], from a 1025-entry table (linear
+/// interpolation; within 1e-5 of the exact value).
+fn limb_transmission(u: f64) -> f64 {
+    static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        (0..=1024)
+            .map(|i| crate::fresnel::transmission(i as f64 / 1024.0, LIMB_ETA))
+            .collect()
+    });
+    let x = u.clamp(0.0, 1.0) * 1024.0;
+    let i = (x as usize).min(1023);
+    let f = x - i as f64;
+    t[i] * (1.0 - f) + t[i + 1] * f
+}
+
 /// Linear features of a band pixel under an outline and blur: coverage, mean cos φ and mean
 /// cos² φ over the pixel's 4×4 sub-samples, each sub-sample spread radially by the blur
 /// (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial offset δ px as s − δ/R.
@@ -371,11 +388,15 @@ fn features(o: &Outline, p: &BandPixel, r_px: f64, blur: f64) -> Lin {
             let d = (1.0 - (s0 + ds)) * r_px;
             let half = 0.5 / SUB as f64;
             let (lo, hi) = ((d - half).max(0.0), d + half);
+            // Background ramp: the uncovered part times its distance outside (px).
+            let out_lo = (-d - half).max(0.0);
+            let out_hi = (-d + half).max(0.0);
+            f[5] += w * (out_hi - out_lo) / (2.0 * half) * 0.5 * (out_lo + out_hi);
             if hi > 0.0 {
                 let cov = (hi - lo) / (2.0 * half);
                 let sm = 1.0 - 0.5 * (lo + hi) / r_px;
                 let u = (1.0 - sm * sm).max(0.0).sqrt();
-                let t = crate::fresnel::transmission(u, LIMB_ETA);
+                let t = limb_transmission(u);
                 let w = w * cov;
                 f[1] += w;
                 f[2] += w * u;
@@ -538,35 +559,13 @@ pub fn refine(
     // pure noise is not more trustworthy than the typical one).
     let blur0 = 0.0;
     let (_, rms0) = band_residuals(start, blur0, &band, sectors, r_px);
-    if std::env::var("DEBUGSEC").is_ok() {
-        for k in 0..sectors {
-            let vals: Vec<f64> = band
-                .iter()
-                .filter(|p| p.sector == k)
-                .map(|p| p.value)
-                .collect();
-            let mx = vals.iter().cloned().fold(0.0, f64::max);
-            eprintln!(
-                "sector {k}: n {} max {:.4} rms {:.2e}",
-                vals.len(),
-                mx,
-                rms0[k]
-            );
-        }
-    }
     let mut finite: Vec<f64> = rms0.iter().cloned().filter(|v| v.is_finite()).collect();
     finite.sort_by(|a, b| a.total_cmp(b));
     let floor = finite.get(finite.len() / 2)?.max(1e-12);
     let w: Vec<f64> = rms0
         .iter()
         .map(|r| {
-            if r.is_finite()
-                && *r
-                    <= std::env::var("REJ")
-                        .map(|v| v.parse().unwrap())
-                        .unwrap_or(1e9)
-                        * floor
-            {
+            if r.is_finite() {
                 1.0 / r.max(floor).powi(2)
             } else {
                 0.0
@@ -643,9 +642,6 @@ pub fn refine(
             let g = (2.0 * unit / geo_norm.max(2.0 * unit)).min(1.0 / step[3].abs().max(1.0));
             let mut trial = x + step * g;
             trial[3] = trial[3].max(0.0);
-            if std::env::var("NOBLUR").is_ok() {
-                trial[3] = 0.0;
-            }
             let (r2, c2) = eval(&trial);
             if c2 < c {
                 let small =
@@ -799,4 +795,86 @@ pub fn blobs(mask: &[bool], width: u32, height: u32, weight: Option<&[f32]>) -> 
     }
     out.sort_by_key(|b| std::cmp::Reverse(b.area));
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limb_table_matches_fresnel() {
+        for k in 0..=1000 {
+            let u = k as f64 / 1000.0;
+            let exact = crate::fresnel::transmission(u, LIMB_ETA);
+            assert!((limb_transmission(u) - exact).abs() < 1e-5, "{u}");
+        }
+    }
+
+    fn edge(o: &Outline, proj: &Projection, q: Vector3<f64>, mag: f64) -> EdgePoint {
+        let px = proj.pixel(&q).unwrap();
+        let c = proj.pixel(&o.center_point()).unwrap();
+        EdgePoint {
+            px,
+            q,
+            dir: (c - px).normalize(),
+            mag,
+        }
+    }
+
+    #[test]
+    fn ransac_finds_the_rim_among_a_terminator_arc() {
+        let cam = crate::synth::session::default_camera();
+        let proj = Projection::Perspective(cam);
+        let s = crate::sphere::Sphere::new(Vector3::new(-30.0, 20.0, 300.0), 15.0);
+        let o = Outline::of_sphere(&s).unwrap();
+        // Half the rim (the lit side), strong edges.
+        let mut pts: Vec<EdgePoint> = o.rim(200)[..100]
+            .iter()
+            .map(|q| edge(&o, &proj, *q, 1.0))
+            .collect();
+        // A soft terminator: a smaller arc inside, weaker edges, gradients toward its own centre.
+        let inner = Outline::of_sphere(&crate::sphere::Sphere::new(s.center, 11.0)).unwrap();
+        pts.extend(
+            inner.rim(200)[100..170]
+                .iter()
+                .map(|q| edge(&inner, &proj, *q, 0.3)),
+        );
+        let fit = ransac(&pts, &proj, (10.0, 200.0), 1.5, 300).unwrap();
+        assert_eq!(fit.inliers.len(), 100);
+        let c = fit.outline.center_mm(15.0).unwrap();
+        assert!((c - s.center).norm() < 1e-6, "{c:?}");
+    }
+
+    #[test]
+    fn blobs_are_labelled_largest_first() {
+        // Two squares (3×3 and 2×2) and a single pixel touching the border, in an 8×6 mask.
+        let (w, h) = (8u32, 6u32);
+        let mut m = vec![false; 48];
+        let on = [
+            (1, 1),
+            (2, 1),
+            (3, 1),
+            (1, 2),
+            (2, 2),
+            (3, 2),
+            (1, 3),
+            (2, 3),
+            (3, 3),
+            (5, 2),
+            (6, 2),
+            (5, 3),
+            (6, 3),
+            (7, 5),
+        ];
+        for (x, y) in on {
+            m[y * 8 + x] = true;
+        }
+        let b = blobs(&m, w, h, None);
+        assert_eq!(b.iter().map(|b| b.area).collect::<Vec<_>>(), [9, 4, 1]);
+        assert_eq!(b[0].centroid, Vector2::new(2.0, 2.0));
+        assert_eq!(b[1].bbox, [5, 2, 6, 3]);
+        assert!(!b[0].touches_border(w, h) && b[2].touches_border(w, h));
+        assert!((b[0].extent - 2f64.sqrt()).abs() < 1e-12);
+        assert_eq!(b[0].mass, 9.0);
+    }
 }
