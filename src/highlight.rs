@@ -378,34 +378,36 @@ pub fn find(
         (sw > 0.0).then(|| c0 + sp / sw)
     };
     // The centroid method, from a start pixel and a window radius (px).
-    let centroid = |start: Vector2<f64>, rw: f64, clipped: usize| -> Result<Highlight, NoHighlight> {
-        let mut c = start;
-        for _ in 0..3 {
-            c = weighted(c, rw).unwrap_or(c);
-        }
-        let l = light_at(c).ok_or_else(|| NoHighlight("highlight outside the sphere".into()))?;
-        // A quarter-pixel position error, mapped through the reflection.
-        let mut jm = Matrix3x2::zeros();
-        for k in 0..2 {
-            let mut d = Vector2::zeros();
-            d[k] = 0.5;
-            let (a, b2) = (light_at(c + d), light_at(c - d));
-            let (Some(a), Some(b2)) = (a, b2) else {
-                return Err(NoHighlight("highlight at the silhouette".into()));
-            };
-            jm.set_column(k, &(a - b2));
-        }
-        let cov = jm * Matrix2::identity() * 0.0625 * jm.transpose();
-        Ok(Highlight {
-            px: c,
-            light: l,
-            cov,
-            method: Method::Centroid,
-            alpha: None,
-            saturated: clipped,
-            radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
-        })
-    };
+    let centroid =
+        |start: Vector2<f64>, rw: f64, clipped: usize| -> Result<Highlight, NoHighlight> {
+            let mut c = start;
+            for _ in 0..3 {
+                c = weighted(c, rw).unwrap_or(c);
+            }
+            let l =
+                light_at(c).ok_or_else(|| NoHighlight("highlight outside the sphere".into()))?;
+            // A quarter-pixel position error, mapped through the reflection.
+            let mut jm = Matrix3x2::zeros();
+            for k in 0..2 {
+                let mut d = Vector2::zeros();
+                d[k] = 0.5;
+                let (a, b2) = (light_at(c + d), light_at(c - d));
+                let (Some(a), Some(b2)) = (a, b2) else {
+                    return Err(NoHighlight("highlight at the silhouette".into()));
+                };
+                jm.set_column(k, &(a - b2));
+            }
+            let cov = jm * Matrix2::identity() * 0.0625 * jm.transpose();
+            Ok(Highlight {
+                px: c,
+                light: l,
+                cov,
+                method: Method::Centroid,
+                alpha: None,
+                saturated: clipped,
+                radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
+            })
+        };
     // Lobe fit in two passes: a 20° patch of half-vector angles, then one sized by the fitted α.
     let mut alpha = 0.1f64;
     let mut theta_max = 20f64.to_radians();
@@ -486,13 +488,19 @@ pub fn find(
     let resolved = |h: &Highlight| h.alpha.is_some_and(|a| a * r_px >= RESOLVED_PX);
     let blob_centroid = |b: &crate::silhouette::Blob| {
         let c = Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y);
-        centroid(c, (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0, b.area)
+        centroid(
+            c,
+            (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0,
+            b.area,
+        )
     };
     match (fitted, &sat_blob) {
         (Some(h), Some(b)) if !resolved(&h) => blob_centroid(b),
-        (Some(h), None) if !resolved(&h) => {
-            centroid(h.px, (3.0 * h.alpha.unwrap_or(0.0) * r_px).max(2.0) + 1.0, 0)
-        }
+        (Some(h), None) if !resolved(&h) => centroid(
+            h.px,
+            (3.0 * h.alpha.unwrap_or(0.0) * r_px).max(2.0) + 1.0,
+            0,
+        ),
         (Some(h), _) => Ok(h),
         (None, Some(b)) => blob_centroid(b),
         (None, None) => Err(NoHighlight(format!(
