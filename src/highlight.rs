@@ -31,6 +31,9 @@ const ETA: f64 = 1.5;
 /// A lobe is resolved when α times the sphere's image radius reaches this many pixels.
 const RESOLVED_PX: f64 = 4.0;
 
+/// Roughest lobe the fit accepts (GGX α); broader ones blend into the diffuse shading.
+const MAX_ALPHA: f64 = 0.25;
+
 /// How a highlight was located.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -99,6 +102,8 @@ const NLIN: usize = 11;
 
 struct Fit {
     l0: Vector3<f64>,
+    /// The light of the located peak: fits may not move more than 20° from it.
+    anchor: Vector3<f64>,
     e1: Vector3<f64>,
     e2: Vector3<f64>,
     center: Vector2<f64>,
@@ -196,7 +201,9 @@ fn solve(fit: &Fit, pix: &[Px], mut x: Vector3<f64>) -> Option<Solution> {
                 step[k] = step[k].clamp(-lim[k], lim[k]);
             }
             let xt = x + step;
-            if !(xt.z > (1e-3f64).ln() && xt.z < 0.0) {
+            if !(xt.z > (1e-3f64).ln() && xt.z < MAX_ALPHA.ln())
+                || (fit.light(&xt) - fit.anchor).norm() > 0.35
+            {
                 lambda *= 10.0;
                 continue;
             }
@@ -270,21 +277,32 @@ pub fn find(
     }
     // Peak candidate: the largest excess of a 3×3 mean over a wide local mean (R/6 box), which
     // favours a compact highlight over the broad diffuse maximum.
+    // Means over interior pixels only (integral images of values and counts), so the dark
+    // background beyond the rim does not make the rim look like a peak.
     let mut integ = vec![0.0f64; (bw + 1) * (bh + 1)];
+    let mut count = vec![0.0f64; (bw + 1) * (bh + 1)];
     for j in 0..bh {
         for i in 0..bw {
-            let v = lum.at(bx0 + i as u32, by0 + j as u32) as f64;
-            integ[(j + 1) * (bw + 1) + i + 1] =
-                v + integ[j * (bw + 1) + i + 1] + integ[(j + 1) * (bw + 1) + i]
-                    - integ[j * (bw + 1) + i];
+            let inside = surf[j * bw + i].is_some();
+            let v = if inside {
+                lum.at(bx0 + i as u32, by0 + j as u32) as f64
+            } else {
+                0.0
+            };
+            let k = (j + 1) * (bw + 1) + i + 1;
+            integ[k] = v + integ[k - (bw + 1)] + integ[k - 1] - integ[k - bw - 2];
+            count[k] = f64::from(u8::from(inside)) + count[k - (bw + 1)] + count[k - 1]
+                - count[k - bw - 2];
         }
     }
     let box_mean = |i: usize, j: usize, r: usize| {
         let (a0, b0) = (i.saturating_sub(r), j.saturating_sub(r));
         let (a1, b1) = ((i + r + 1).min(bw), (j + r + 1).min(bh));
-        let s = integ[b1 * (bw + 1) + a1] - integ[b0 * (bw + 1) + a1] - integ[b1 * (bw + 1) + a0]
-            + integ[b0 * (bw + 1) + a0];
-        s / ((a1 - a0) * (b1 - b0)) as f64
+        let rect = |t: &[f64]| {
+            t[b1 * (bw + 1) + a1] - t[b0 * (bw + 1) + a1] - t[b1 * (bw + 1) + a0]
+                + t[b0 * (bw + 1) + a0]
+        };
+        rect(&integ) / rect(&count).max(1.0)
     };
     let wide = ((r_px / 6.0).round() as usize).max(3);
     let mut best: Option<(f64, usize, usize)> = None;
@@ -327,6 +345,15 @@ pub fn find(
     } else {
         None
     };
+    // A clipped region this large is clipped diffuse shading, not a highlight.
+    let clipped = sat_mask.iter().filter(|&&m| m).count();
+    let disc = std::f64::consts::PI * r_px * r_px;
+    if clipped as f64 > 0.02 * disc {
+        return Err(NoHighlight(format!(
+            "{clipped} px ({:.0}% of the sphere) clipped: lower the exposure",
+            100.0 * clipped as f64 / disc
+        )));
+    }
     let start_px = match &sat_blob {
         Some(b) => Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y),
         None => peak,
@@ -408,11 +435,12 @@ pub fn find(
                 radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
             })
         };
-    // Lobe fit in two passes: a 20° patch of half-vector angles, then one sized by the fitted α.
-    let mut alpha = 0.1f64;
-    let mut theta_max = 20f64.to_radians();
+    // Lobe fit in two passes: a 30° patch of half-vector angles tried from three roughnesses
+    // (the best fit with a positive lobe wins), then a patch sized by the fitted α.
     let mut result = None;
     let mut l0 = l_start;
+    let mut theta_max = 30f64.to_radians();
+    let mut starts = vec![0.03, 0.08, 0.2];
     for _pass in 0..2 {
         let mut pix = vec![];
         for j in 0..bh {
@@ -441,29 +469,37 @@ pub fn find(
         let (e1, e2) = tangent_basis(&l0);
         let fit = Fit {
             l0,
+            anchor: l_start,
             e1,
             e2,
             center: start_px,
             scale: theta_max.sin() * r_px,
         };
-        let Some((x, r, c, j)) = solve(&fit, &pix, Vector3::new(0.0, 0.0, alpha.ln())) else {
+        let best = starts
+            .iter()
+            .filter_map(|&a0: &f64| solve(&fit, &pix, Vector3::new(0.0, 0.0, a0.ln())))
+            .filter(|(x, _, c, _)| c[NLIN - 1] > 0.0 && x.z.exp() < MAX_ALPHA)
+            .min_by(|a, b| a.1.norm_squared().total_cmp(&b.1.norm_squared()));
+        let Some((x, r, c, j)) = best else {
+            result = None;
             break;
         };
         let l = fit.light(&x);
-        alpha = x.z.exp();
+        let alpha = x.z.exp();
         let dof = pix.len().saturating_sub(NLIN + 3).max(1) as f64;
         let sigma2 = r.norm_squared() / dof;
         let amp = c[NLIN - 1] * pix.iter().map(|p| shape(p, &l, alpha)).fold(0.0, f64::max);
         let trend_at_peak = c[0];
         result = Some((l, alpha, sigma2, amp, trend_at_peak, j, e1, e2, pix.len()));
         l0 = l;
+        starts = vec![alpha];
         theta_max = (3.0 * alpha)
             .atan()
             .clamp(6f64.to_radians(), 45f64.to_radians());
     }
     let fitted = result.and_then(|(l, alpha, sigma2, amp, trend, j, b1, b2, npix)| {
         let significant = amp > 6.0 * sigma2.sqrt().max(noise) && amp > 0.02 * trend.abs();
-        let plausible = alpha > 1.5e-3 && alpha < 0.6 && npix >= 20;
+        let plausible = alpha > 1.5e-3 && alpha < MAX_ALPHA && npix >= 20;
         if !(significant && plausible) {
             return None;
         }
@@ -552,9 +588,14 @@ pub fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Option<Combi
             info = Matrix2::zeros();
             let mut rhs = Vector2::zeros();
             for (i, (l, c)) in est.iter().enumerate() {
-                let d = e.transpose() * (l - m);
-                let c2 = e.transpose() * c * e + Matrix2::identity() * floor * floor;
+                // Residual and weight in the estimate's own tangent plane (its covariance is
+                // degenerate along l, which another plane would not see), mapped to m's plane.
+                let (f1, f2) = tangent_basis(l);
+                let ei = Matrix3x2::from_columns(&[f1, f2]);
+                let d = ei.transpose() * (l - m);
+                let c2 = ei.transpose() * c * ei + Matrix2::identity() * floor * floor;
                 let wm = c2.try_inverse()?;
+                let jm = ei.transpose() * e;
                 r[i] = (d.transpose() * wm * d)[0].max(0.0).sqrt();
                 weights[i] = if excluded[i] {
                     0.0
@@ -563,8 +604,8 @@ pub fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Option<Combi
                 } else {
                     1.0
                 };
-                info += wm * weights[i];
-                rhs += wm * d * weights[i];
+                info += jm.transpose() * wm * jm * weights[i];
+                rhs += jm.transpose() * wm * d * weights[i];
             }
             let step = info.try_inverse()? * rhs;
             m = (m + e * step).normalize();

@@ -307,7 +307,7 @@ mod tests {
         let proj = Projection::Perspective(cam);
         let sp = Sphere::new(Vector3::new(60.0, -40.0, 500.0), 30.0);
         let o = Outline::of_sphere(&sp).unwrap();
-        for px in [Vector2::new(700.0, 400.0), Vector2::new(760.0, 420.0)] {
+        for px in [Vector2::new(800.0, 370.0), Vector2::new(860.0, 400.0)] {
             let q = proj.point(px).unwrap();
             let s = o.s(&q);
             let surf = o.surface(&q).unwrap();

@@ -56,7 +56,7 @@ pub fn write(
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         let err = |e: DrawingAreaErrorKind<_>| Error::invalid(path, format!("cannot draw: {e}"));
-        for f in found {
+        for (idx, f) in found.iter().enumerate() {
             let rim: Vec<(i32, i32)> = f
                 .outline
                 .rim(720)
@@ -79,7 +79,7 @@ pub fn write(
             };
             let r = f.outline.radius_px(proj) / k as f64;
             let (cx, cy) = scale(c);
-            let label_at = (cx - (r * 0.9) as i32, cy + (r * 1.08) as i32);
+
             let text = match &f.highlight {
                 Ok(hl) => {
                     let (hx, hy) = scale(hl.px);
@@ -96,14 +96,24 @@ pub fn write(
                     .map_err(err)?;
                     let a = LightAngles::from_direction(&hl.light);
                     format!(
-                        "r {} mm · az {:.2}° el {:.2}°",
+                        "{} mm: az {:.2}° el {:.2}°",
                         f.radius_mm,
                         a.azimuth.to_degrees(),
                         a.elevation.to_degrees()
                     )
                 }
-                Err(why) => format!("r {} mm · no highlight: {}", f.radius_mm, short(why)),
+                Err(why) => format!("{} mm: no highlight ({})", f.radius_mm, short(why)),
             };
+            // Labels alternate below and above the spheres (a row of them does not collide),
+            // kept inside the frame.
+            let text_w = (text.chars().count() as f64 * font_px * 0.55) as i32;
+            let x = (cx - text_w / 2).clamp(4, (w as i32 - text_w - 4).max(4));
+            let y = if idx % 2 == 0 {
+                cy + (r * 1.05) as i32 + 4
+            } else {
+                cy - (r * 1.05) as i32 - font_px as i32 - 4
+            };
+            let label_at = (x, y.clamp(4, h as i32 - font_px as i32 - 4));
             root.draw(&Text::new(
                 text,
                 label_at,
@@ -140,6 +150,5 @@ pub fn write(
 }
 
 fn short(s: &str) -> String {
-    let s: String = s.chars().take(40).collect();
-    s
+    s.split(" (").next().unwrap_or(s).chars().take(40).collect()
 }

@@ -224,3 +224,36 @@ fn calibrate_a_synthetic_folder_and_refuse_an_empty_one() {
         "expected a positive size",
     );
 }
+
+#[test]
+fn detect_writes_detections_and_overlays_and_refuses_a_wrong_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let o = out.to_str().unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet", "synth", "session", "--out", o, "--size", "640x480", "--fx", "700", "--radii",
+        "20,12", "--layout", "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, stdout, err) = wb(&["--quiet", "detect", o]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("light    session"), "{stdout}");
+    let det: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("detections.json")).unwrap())
+            .unwrap();
+    assert_eq!(det["schema"], "workbench.detections/1");
+    assert_eq!(det["images"][0]["spheres"].as_array().unwrap().len(), 2);
+    assert!(out.join("overlays/row.png").is_file());
+    // The session lists one sphere too few.
+    let p = out.join("session.json");
+    let mut s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    s["images"][0]["spheres"].as_array_mut().unwrap().pop();
+    std::fs::write(&p, s.to_string()).unwrap();
+    assert_clean_failure(&["--quiet", "detect", o], "row.png");
+    assert_clean_failure(
+        &["--quiet", "detect", o],
+        "found 2 sphere(s), session.json lists 1",
+    );
+    assert_clean_failure(&["detect", "/nonexistent/session"], "/nonexistent/session");
+}
