@@ -3,6 +3,7 @@
 //! 2. OpenCV's sample photos (../shared/data/opencv-left): workbench against OpenCV's own Python
 //!    bindings with the same flags (benches/cv2_calibrate.py, needs python3-opencv), same run;
 //! 3. 20 synthetic views of 24 MP: time of detection and of calibration.
+//!
 //! Prints Markdown tables.
 
 use std::path::Path;

@@ -5,6 +5,7 @@
 //! 2. DiLiGenT's ball (../shared/data/diligent-ball): light error against the calibrated
 //!    directions, with the plain saturated-blob centroid on the same outline as the baseline;
 //! 3. time per 24 MP photo (3 photos in parallel on this machine's cores).
+//!
 //! Prints Markdown tables.
 
 use nalgebra::{Vector2, Vector3};
@@ -107,10 +108,9 @@ fn main() {
         );
     }
 
-    if let Some(ball) = Path::new(env!("CARGO_MANIFEST_DIR"))
+    if let Ok(ball) = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/data/diligent-ball")
         .canonicalize()
-        .ok()
     {
         println!("\n## DiLiGenT ball (48 photos, no mask/normals/lights/intrinsics given)\n");
         let names: Vec<String> = std::fs::read_to_string(ball.join("filenames.txt"))

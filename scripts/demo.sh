@@ -17,3 +17,4 @@ else
   echo "calib/demo/intrinsics.json is up to date: calibration reused"
 fi
 "$wb" check datasets/demo
+"$wb" detect datasets/demo
