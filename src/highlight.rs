@@ -19,7 +19,7 @@
 //! An estimate is accepted only if the lobe stands out of the noise (6σ) and of the diffuse
 //! level (2%); otherwise the sphere is reported as having no usable highlight.
 
-use crate::outline::{reflect, Outline, Projection};
+use crate::outline::{reflect, tangent_basis, Outline, Projection};
 use crate::silhouette::{blobs, Plane};
 use crate::specular;
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix3x2, SMatrix, SVector, Vector2, Vector3};
@@ -73,17 +73,6 @@ impl Highlight {
 /// Why no highlight was used.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoHighlight(pub String);
-
-fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let e1 = a
-        .cross(&if a.x.abs() < 0.9 {
-            Vector3::x()
-        } else {
-            Vector3::y()
-        })
-        .normalize();
-    (e1, a.cross(&e1))
-}
 
 struct Px {
     px: Vector2<f64>,
@@ -240,25 +229,9 @@ pub fn find(
     noise: f64,
 ) -> Result<Highlight, NoHighlight> {
     let r_px = outline.radius_px(proj);
-    let rim: Vec<Vector2<f64>> = outline
-        .rim(360)
-        .iter()
-        .filter_map(|q| proj.pixel(q))
-        .collect();
-    let bx0 = rim
-        .iter()
-        .map(|p| p.x)
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as u32;
-    let by0 = rim
-        .iter()
-        .map(|p| p.y)
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as u32;
-    let bx1 = (rim.iter().map(|p| p.x).fold(0.0, f64::max).ceil() as u32).min(lum.width - 1);
-    let by1 = (rim.iter().map(|p| p.y).fold(0.0, f64::max).ceil() as u32).min(lum.height - 1);
+    let [bx0, by0, bx1, by1] = outline
+        .pixel_box(proj, 0.0, lum.width, lum.height)
+        .ok_or_else(|| NoHighlight("the sphere leaves the image".into()))?;
     let (bw, bh) = ((bx1 - bx0 + 1) as usize, (by1 - by0 + 1) as usize);
     let w = lum.width as usize;
     // Geometry of every pixel well inside the silhouette.

@@ -60,7 +60,8 @@ pub struct Surface {
     pub view: Vector3<f64>,
 }
 
-fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+/// An orthonormal basis (e1, e2) of the plane perpendicular to a unit vector.
+pub fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let e1 = a
         .cross(&if a.x.abs() < 0.9 {
             Vector3::x()
@@ -281,6 +282,32 @@ impl Outline {
             .zip(other.rim(72))
             .filter_map(|(p, q)| Some((proj.pixel(p)? - proj.pixel(&q)?).norm()))
             .fold(0.0, f64::max)
+    }
+
+    /// Inclusive pixel box [x0, y0, x1, y1] of the silhouette (720 rim points), padded by `pad`
+    /// pixels and clipped to a `width` × `height` image; `None` when part of the rim has no pixel.
+    pub fn pixel_box(
+        &self,
+        proj: &Projection,
+        pad: f64,
+        width: u32,
+        height: u32,
+    ) -> Option<[u32; 4]> {
+        let rim: Vec<Vector2<f64>> = self.rim(720).iter().filter_map(|q| proj.pixel(q)).collect();
+        if rim.len() < 720 || width == 0 || height == 0 {
+            return None;
+        }
+        let lo =
+            |f: fn(&Vector2<f64>) -> f64| rim.iter().map(f).fold(f64::INFINITY, f64::min) - pad;
+        let hi =
+            |f: fn(&Vector2<f64>) -> f64| rim.iter().map(f).fold(f64::NEG_INFINITY, f64::max) + pad;
+        let clip = |v: f64, max: u32| v.clamp(0.0, (max - 1) as f64) as u32;
+        Some([
+            clip(lo(|p| p.x).floor(), width),
+            clip(lo(|p| p.y).floor(), height),
+            clip(hi(|p| p.x).ceil(), width),
+            clip(hi(|p| p.y).ceil(), height),
+        ])
     }
 
     /// The sphere's centre (mm) for a known radius; `None` for an orthographic outline.

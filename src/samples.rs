@@ -62,28 +62,9 @@ pub fn sphere_samples(
     highlight_radius: Option<f64>,
 ) -> Vec<Sample> {
     let r_px = outline.radius_px(proj);
-    let rim: Vec<Vector2<f64>> = outline
-        .rim(360)
-        .iter()
-        .filter_map(|q| proj.pixel(q))
-        .collect();
-    if rim.is_empty() {
+    let Some([x0, y0, x1, y1]) = outline.pixel_box(proj, 0.0, img.width, img.height) else {
         return vec![];
-    }
-    let x0 = rim
-        .iter()
-        .map(|p| p.x)
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as u32;
-    let y0 = rim
-        .iter()
-        .map(|p| p.y)
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as u32;
-    let x1 = (rim.iter().map(|p| p.x).fold(0.0, f64::max).ceil() as u32).min(img.width - 1);
-    let y1 = (rim.iter().map(|p| p.y).fold(0.0, f64::max).ceil() as u32).min(img.height - 1);
+    };
     let mut out = vec![];
     for y in y0..=y1 {
         for x in x0..=x1 {

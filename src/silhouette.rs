@@ -482,26 +482,11 @@ pub fn refine(
     outer_px: f64,
 ) -> Option<Refined> {
     let r_px = start.radius_px(proj);
-    let rim: Vec<Vector2<f64>> = start
-        .rim(720)
-        .iter()
-        .filter_map(|q| proj.pixel(q))
-        .collect();
-    if rim.len() < 720 || images.is_empty() {
+    if images.is_empty() {
         return None;
     }
     let (width, height) = (images[0].0.width, images[0].0.height);
-    let pad = outer_px + 2.0;
-    let x0 = (rim.iter().map(|p| p.x).fold(f64::INFINITY, f64::min) - pad)
-        .floor()
-        .max(0.0) as u32;
-    let y0 = (rim.iter().map(|p| p.y).fold(f64::INFINITY, f64::min) - pad)
-        .floor()
-        .max(0.0) as u32;
-    let x1 = ((rim.iter().map(|p| p.x).fold(f64::NEG_INFINITY, f64::max) + pad).ceil() as u32)
-        .min(width - 1);
-    let y1 = ((rim.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max) + pad).ceil() as u32)
-        .min(height - 1);
+    let [x0, y0, x1, y1] = start.pixel_box(proj, outer_px + 2.0, width, height)?;
     let center_px = proj.pixel(&start.center_point())?;
     // Geometry of the band, shared by all photos.
     let mut geo = vec![];
