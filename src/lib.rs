@@ -27,6 +27,7 @@ pub mod progress;
 pub mod samples;
 pub mod session;
 pub mod silhouette;
+pub mod solver;
 pub mod specular;
 pub mod sphere;
 pub mod synth;
