@@ -75,9 +75,9 @@ impl Problem<'_> {
                 let mut j = vec![];
                 if want_jacobian {
                     j.reserve(3 * n);
-                    for c in 0..3 {
+                    for (w, gc) in o.weight.iter().zip(&g) {
                         for &k in &free {
-                            j.push(o.weight[c] * g[c][k] * dpdu[k]);
+                            j.push(w * gc[k] * dpdu[k]);
                         }
                     }
                 }
