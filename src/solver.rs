@@ -181,3 +181,59 @@ pub fn fit(model: Model, obs: &[Obs], start: &Params, free: [bool; N_PARAMS]) ->
         converged: report.termination.was_successful(),
     }
 }
+
+/// A fit with the Huber loss, by iteratively reweighted least squares around [`fit`]: residuals
+/// are scaled by a robust σ (1.4826 × their median absolute value), those beyond `k` σ get weight
+/// k/|r| (their square root multiplies the channel weight), and the fit is repeated from its own
+/// result until no weight changes by more than 1% (at most `rounds` times). Returns the final fit
+/// and the observations with their final weights.
+pub fn fit_robust(
+    model: Model,
+    obs: &[Obs],
+    start: &Params,
+    free: [bool; N_PARAMS],
+    k: f64,
+    rounds: usize,
+) -> (Fit, Vec<Obs>) {
+    let mut current: Vec<Obs> = obs.to_vec();
+    let mut f = fit(model, &current, start, free);
+    for _ in 0..rounds {
+        let probe = Problem {
+            model,
+            obs: obs,
+            free,
+            u: to_unbounded(&f.params.to_vec()),
+        };
+        let (res, _) = probe.evaluate(false);
+        let mut abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
+        if abs.is_empty() {
+            break;
+        }
+        abs.sort_by(|a, b| a.total_cmp(b));
+        let sigma = 1.4826 * abs[abs.len() / 2];
+        let mut changed = false;
+        let next: Vec<Obs> = obs
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let mut o2 = *o;
+                for c in 0..3 {
+                    let z = res[3 * i + c].abs() / sigma.max(1e-300);
+                    let w = if z > k { (k / z).sqrt() } else { 1.0 };
+                    o2.weight[c] = o.weight[c] * w;
+                    if (o2.weight[c] - current[i].weight[c]).abs() > 0.01 * o.weight[c].max(1e-300)
+                    {
+                        changed = true;
+                    }
+                }
+                o2
+            })
+            .collect();
+        current = next;
+        if !changed {
+            break;
+        }
+        f = fit(model, &current, &f.params, free);
+    }
+    (f, current)
+}

@@ -176,3 +176,33 @@ fn recovers_known_parameters_from_a_bad_start() {
     assert_eq!(f.std[idx::ETA], 0.0);
     assert_eq!(f.correlation.nrows(), N_PARAMS - 1);
 }
+
+#[test]
+fn huber_reweighting_ignores_a_few_bad_pixels() {
+    let p = truth();
+    let mut obs = observations(&p, &[30.0, 15.0], 2000, 0.01, 5);
+    // 3% of the pixels wrong by a factor of three (dust, a reflection).
+    for o in obs.iter_mut().step_by(33) {
+        o.radiance = o.radiance.map(|v| 3.0 * v + 0.05);
+    }
+    let mut free = [true; N_PARAMS];
+    free[idx::ETA] = false;
+    let plain = solver::fit(Model::default(), &obs, &p, free);
+    let (robust, weights) = solver::fit_robust(Model::default(), &obs, &p, free, 1.345, 8);
+    let err = |f: &solver::Fit| {
+        (0..6)
+            .map(|k| (f.params.to_vec()[k] - p.to_vec()[k]).abs() / p.to_vec()[k])
+            .fold(0.0, f64::max)
+    };
+    println!(
+        "worst relative error of σ0 and albedo: plain {:.4}, Huber {:.4}",
+        err(&plain),
+        err(&robust)
+    );
+    assert!(err(&plain) > 0.03, "the outliers should pull a plain fit");
+    assert!(err(&robust) < 0.01, "{}", err(&robust));
+    // The bad pixels end with small weights.
+    let bad: f64 = weights.iter().step_by(33).map(|o| o.weight[1]).sum::<f64>()
+        / (weights.len() / 33 + 1) as f64;
+    assert!(bad < 0.2, "{bad}");
+}
