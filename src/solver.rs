@@ -200,7 +200,7 @@ pub fn fit_robust(
     for _ in 0..rounds {
         let probe = Problem {
             model,
-            obs: obs,
+            obs,
             free,
             u: to_unbounded(&f.params.to_vec()),
         };
