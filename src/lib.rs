@@ -24,6 +24,7 @@ pub mod overlay;
 pub mod photo;
 pub mod plot;
 pub mod progress;
+pub mod reduce;
 pub mod samples;
 pub mod session;
 pub mod silhouette;

@@ -206,3 +206,38 @@ fn huber_reweighting_ignores_a_few_bad_pixels() {
         / (weights.len() / 33 + 1) as f64;
     assert!(bad < 0.2, "{bad}");
 }
+
+#[test]
+fn pooled_cells_fit_like_every_pixel() {
+    let p = truth();
+    let obs = observations(&p, &[35.0, 25.0, 15.0], 20000, 0.01, 21);
+    let mut free = [true; N_PARAMS];
+    free[idx::ETA] = false;
+    let full = solver::fit(Model::default(), &obs, &p, free);
+    let l = p.light.direction();
+    for deg in [1.0f64, 2.0, 4.0] {
+        let pooled = workbench::reduce::pool(&obs, &l, deg.to_radians(), (3.0f64 * 0.1).atan());
+        let f = solver::fit(Model::default(), &pooled, &p, free);
+        // Largest difference from the all-pixel fit, in units of that fit's standard error.
+        let z = (0..6)
+            .map(|k| (f.params.to_vec()[k] - full.params.to_vec()[k]).abs() / full.std[k])
+            .fold(0.0, f64::max);
+        let light = f
+            .params
+            .light
+            .direction()
+            .angle(&full.params.light.direction())
+            .to_degrees();
+        println!(
+            "cells {deg}°: {} observations from {} ({:.0}×), σ0/albedo within {z:.2} std of the full fit, light {light:.4}°",
+            pooled.len(),
+            obs.len(),
+            obs.len() as f64 / pooled.len() as f64
+        );
+        assert!(pooled.len() < obs.len());
+        if deg <= 1.0 {
+            assert!(z < 1.0, "{deg}°: {z}");
+            assert!(light < 0.02, "{deg}°: {light}");
+        }
+    }
+}
