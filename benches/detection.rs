@@ -8,6 +8,9 @@
 //!
 //! Prints Markdown tables.
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 use std::time::Instant;
@@ -113,30 +116,8 @@ fn main() {
         .canonicalize()
     {
         println!("\n## DiLiGenT ball (48 photos, no mask/normals/lights/intrinsics given)\n");
-        let names: Vec<String> = std::fs::read_to_string(ball.join("filenames.txt"))
-            .unwrap()
-            .lines()
-            .filter(|l| !l.trim().is_empty())
-            .map(|l| l.trim().to_string())
-            .collect();
-        let truth: Vec<[f64; 3]> = std::fs::read_to_string(ball.join("light_directions.txt"))
-            .unwrap()
-            .lines()
-            .filter(|l| !l.trim().is_empty())
-            .map(|l| {
-                let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-                [v[0], -v[1], -v[2]]
-            })
-            .collect();
         let dir = tempfile::tempdir().unwrap();
-        let session = serde_json::json!({
-            "schema": "workbench.session/1",
-            "light": "per-image",
-            "images": names.iter().map(|n| serde_json::json!({
-                "file": ball.join(n).display().to_string(), "spheres": [{"radius_mm": 20.0}]
-            })).collect::<Vec<_>>()
-        });
-        std::fs::write(dir.path().join("session.json"), session.to_string()).unwrap();
+        let (names, truth) = common::diligent_session(&ball, dir.path());
         let t0 = Instant::now();
         let d = detect(dir.path());
         let secs = t0.elapsed().as_secs_f64();

@@ -152,9 +152,9 @@ pub struct Detections {
     pub seconds: f64,
 }
 
-/// Everything found on one sphere, before serialisation.
+/// A sphere's silhouette as found in one photo (or fitted over several).
 #[derive(Clone, Debug)]
-pub struct Found {
+pub struct Silhouette {
     pub radius_mm: f64,
     pub outline: Outline,
     pub std_px: [f64; 3],
@@ -165,7 +165,31 @@ pub struct Found {
     pub noise: f64,
     pub edge_points: usize,
     pub inlier_px: Vec<Vector2<f64>>,
+}
+
+/// Everything found on one sphere, before serialisation.
+#[derive(Clone, Debug)]
+pub struct Found {
+    pub silhouette: Silhouette,
+    /// The highlight, or why there is none.
     pub highlight: std::result::Result<Highlight, String>,
+}
+
+/// Locate the highlight on every sphere of a photo (once its outlines are final).
+pub fn locate_highlights(
+    img: &LinearRgb,
+    lum: &Plane,
+    proj: &Projection,
+    spheres: Vec<Silhouette>,
+) -> Vec<Found> {
+    spheres
+        .into_iter()
+        .map(|s| Found {
+            highlight: highlight::find(lum, &img.saturated, proj, &s.outline, s.noise)
+                .map_err(|e| e.0),
+            silhouette: s,
+        })
+        .collect()
 }
 
 /// Background level and noise of a photo: median and 1.4826·MAD of the luminance (sampled).
@@ -192,15 +216,16 @@ pub fn luminance(img: &LinearRgb) -> Plane {
     }
 }
 
-/// Find the spheres of one photo (left to right; `radii` as listed in the session).
+/// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
+/// session). `lum` is the photo's [`luminance`].
 pub fn find_spheres(
     img: &LinearRgb,
+    lum: &Plane,
     proj: &Projection,
     radii: &[f64],
     path: &Path,
-) -> Result<Vec<Found>> {
-    let lum = luminance(img);
-    let (bg, noise) = background(&lum);
+) -> Result<Vec<Silhouette>> {
+    let (bg, noise) = background(lum);
     let mut top: Vec<f32> = lum
         .data
         .iter()
@@ -261,7 +286,7 @@ pub fn find_spheres(
             .collect();
         inside.sort_by(|a, b| a.total_cmp(b));
         let level = inside[inside.len() * 9 / 10];
-        let edges = silhouette::edge_points(&lum, region, (5.0 * noise).max(0.03 * level), proj);
+        let edges = silhouette::edge_points(lum, region, (5.0 * noise).max(0.03 * level), proj);
         let fail = |what: &str| {
             Error::invalid(
                 path,
@@ -280,7 +305,7 @@ pub fn find_spheres(
             return Err(fail("too few silhouette edge points"));
         }
         let refined = silhouette::refine_repeated(
-            &[(&lum, Some(&img.saturated))],
+            &[(lum, Some(&img.saturated))],
             proj,
             &fit.outline,
             BAND_INNER_PX,
@@ -294,9 +319,7 @@ pub fn find_spheres(
         } else {
             fit.outline
         };
-        let hl =
-            highlight::find(&lum, &img.saturated, proj, &outline, noise.max(1e-6)).map_err(|e| e.0);
-        out.push(Found {
+        out.push(Silhouette {
             radius_mm,
             outline,
             std_px: refined.std_px,
@@ -305,7 +328,6 @@ pub fn find_spheres(
             noise: noise.max(1e-6),
             edge_points: edges.len(),
             inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
-            highlight: hl,
         });
     }
     Ok(out)
@@ -313,23 +335,22 @@ pub fn find_spheres(
 
 /// Spheres that stayed put across the photos (same radii in every photo, outlines within 2 px):
 /// refit each outline over all photos at once. Each photo lights a different part of the rim, so
-/// the edge model's light-dependent errors average out (photometric-stereo sets). The highlights
-/// are then located again on the common outline.
-pub fn pool_static_spheres(per_image: &mut [(LinearRgb, Vec<Found>)], proj: &Projection) {
+/// the edge model's light-dependent errors average out (photometric-stereo sets). `per_image`:
+/// each photo, its luminance and its silhouettes.
+pub fn pool_static_spheres(
+    per_image: &mut [(LinearRgb, Plane, Vec<Silhouette>)],
+    proj: &Projection,
+) {
     if per_image.len() < 2 {
         return;
     }
-    let radii = |fs: &[Found]| fs.iter().map(|f| f.radius_mm).collect::<Vec<_>>();
-    let first = radii(&per_image[0].1);
-    if per_image.iter().any(|(_, fs)| radii(fs) != first) {
+    let radii = |fs: &[Silhouette]| fs.iter().map(|f| f.radius_mm).collect::<Vec<_>>();
+    let first = radii(&per_image[0].2);
+    if per_image.iter().any(|(_, _, fs)| radii(fs) != first) {
         return;
     }
-    let lums: Vec<Plane> = per_image
-        .par_iter()
-        .map(|(img, _)| luminance(img))
-        .collect();
     for j in 0..first.len() {
-        let outlines: Vec<Outline> = per_image.iter().map(|(_, fs)| fs[j].outline).collect();
+        let outlines: Vec<Outline> = per_image.iter().map(|(_, _, fs)| fs[j].outline).collect();
         let Some(medoid) = outlines.iter().min_by(|a, b| {
             let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
             let db: f64 = outlines.iter().map(|o| b.distance_px(o, proj)).sum();
@@ -346,12 +367,11 @@ pub fn pool_static_spheres(per_image: &mut [(LinearRgb, Vec<Found>)], proj: &Pro
         if 4 * agree.iter().filter(|&&a| a).count() < 3 * outlines.len() {
             continue;
         }
-        let images: Vec<(&Plane, Option<&[bool]>)> = lums
+        let images: Vec<(&Plane, Option<&[bool]>)> = per_image
             .iter()
-            .zip(per_image.iter())
             .zip(&agree)
             .filter(|(_, &a)| a)
-            .map(|((l, (img, _)), _)| (l, Some(img.saturated.as_slice())))
+            .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
             .collect();
         let Some(joint) =
             silhouette::refine_repeated(&images, proj, medoid, BAND_INNER_PX, BAND_OUTER_PX)
@@ -362,18 +382,13 @@ pub fn pool_static_spheres(per_image: &mut [(LinearRgb, Vec<Found>)], proj: &Pro
             continue;
         }
         let n = images.len();
-        per_image
-            .par_iter_mut()
-            .zip(&lums)
-            .for_each(|((img, fs), lum)| {
-                let f = &mut fs[j];
-                f.outline = joint.outline;
-                f.std_px = joint.std_px;
-                f.blur_px = joint.blur_px;
-                f.photos = n;
-                f.highlight = highlight::find(lum, &img.saturated, proj, &f.outline, f.noise)
-                    .map_err(|e| e.0);
-            });
+        for (_, _, fs) in per_image.iter_mut() {
+            let f = &mut fs[j];
+            f.outline = joint.outline;
+            f.std_px = joint.std_px;
+            f.blur_px = joint.blur_px;
+            f.photos = n;
+        }
     }
 }
 
@@ -406,21 +421,30 @@ pub fn run(opts: &Options) -> Result<Detections> {
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
     let pb = crate::progress::bar(report.images.len() as u64, "detect", opts.quiet);
-    let per_image: Vec<Result<(LinearRgb, Vec<Found>)>> = report
+    let per_image: Vec<Result<(LinearRgb, Plane, Vec<Silhouette>)>> = report
         .images
         .par_iter()
         .zip(&sess.images)
         .map(|(info, si)| {
             let img = load_linear_rgb(&info.path, si.linear)?;
-            let f = find_spheres(&img, &proj, &info.radii_mm, &info.path)?;
+            let lum = luminance(&img);
+            let f = find_spheres(&img, &lum, &proj, &info.radii_mm, &info.path)?;
             pb.inc(1);
-            Ok((img, f))
+            Ok((img, lum, f))
         })
         .collect();
     pb.finish_and_clear();
-    let mut per_image: Vec<(LinearRgb, Vec<Found>)> =
+    let mut per_image: Vec<(LinearRgb, Plane, Vec<Silhouette>)> =
         per_image.into_iter().collect::<Result<_>>()?;
     pool_static_spheres(&mut per_image, &proj);
+    // Highlights once the outlines are final.
+    let per_image: Vec<(LinearRgb, Vec<Found>)> = per_image
+        .into_par_iter()
+        .map(|(img, lum, sil)| {
+            let found = locate_highlights(&img, &lum, &proj, sil);
+            (img, found)
+        })
+        .collect();
     // Lights: per photo, then over the session.
     let est = |f: &Found| f.highlight.as_ref().ok().map(|h| (h.light, h.cov));
     let image_lights: Vec<Option<highlight::Combined>> = per_image
@@ -481,27 +505,34 @@ pub fn run(opts: &Options) -> Result<Detections> {
                     img,
                     info.exposure.unwrap_or(1.0),
                     &proj,
-                    &f.outline,
-                    f.radius_mm,
+                    &f.silhouette.outline,
+                    f.silhouette.radius_mm,
                     light_for_samples.as_ref(),
                     hl.map(|h| h.radius),
                 );
                 SphereDetection {
-                    radius_mm: f.radius_mm,
-                    ellipse: f.outline.ellipse(&proj).map(EllipseJson::from).unwrap_or(
-                        EllipseJson {
+                    radius_mm: f.silhouette.radius_mm,
+                    ellipse: f
+                        .silhouette
+                        .outline
+                        .ellipse(&proj)
+                        .map(EllipseJson::from)
+                        .unwrap_or(EllipseJson {
                             center_px: [f64::NAN; 2],
                             axes_px: [f64::NAN; 2],
                             angle_deg: f64::NAN,
-                        },
-                    ),
-                    center_mm: f.outline.center_mm(f.radius_mm).map(|c| arr3(&c)),
-                    outline: OutlineJson::from(&f.outline),
-                    silhouette_std_px: f.std_px,
-                    silhouette_blur_px: f.blur_px,
-                    silhouette_photos: f.photos,
-                    edge_points: f.edge_points,
-                    edge_inliers: f.inlier_px.len(),
+                        }),
+                    center_mm: f
+                        .silhouette
+                        .outline
+                        .center_mm(f.silhouette.radius_mm)
+                        .map(|c| arr3(&c)),
+                    outline: OutlineJson::from(&f.silhouette.outline),
+                    silhouette_std_px: f.silhouette.std_px,
+                    silhouette_blur_px: f.silhouette.blur_px,
+                    silhouette_photos: f.silhouette.photos,
+                    edge_points: f.silhouette.edge_points,
+                    edge_inliers: f.silhouette.inlier_px.len(),
                     highlight_px: hl.map(|h| [h.px.x, h.px.y]),
                     light_direction: hl.map(|h| arr3(&h.light)),
                     light_std_deg: hl.map(|h| h.std().to_degrees()),

@@ -229,13 +229,9 @@ impl Outline {
 
     /// The size of one pixel in the units of [`Outline::moved`].
     pub fn pixel_unit(&self, proj: &Projection) -> f64 {
-        match (self, proj) {
-            (Outline::Cone { half_angle, .. }, Projection::Perspective(c)) => {
-                let r = self.radius_px(proj);
-                let _ = c;
-                half_angle / r
-            }
-            _ => 1.0,
+        match self {
+            Outline::Cone { half_angle, .. } => half_angle / self.radius_px(proj),
+            Outline::Circle { .. } => 1.0,
         }
     }
 

@@ -58,6 +58,7 @@ pub fn write(
         let err = |e: DrawingAreaErrorKind<_>| Error::invalid(path, format!("cannot draw: {e}"));
         for (idx, f) in found.iter().enumerate() {
             let rim: Vec<(i32, i32)> = f
+                .silhouette
                 .outline
                 .rim(720)
                 .iter()
@@ -70,14 +71,14 @@ pub fn write(
             }
             root.draw(&PathElement::new(closed, GREEN.stroke_width(thick)))
                 .map_err(err)?;
-            for p in f.inlier_px.iter().step_by(3) {
+            for p in f.silhouette.inlier_px.iter().step_by(3) {
                 root.draw(&Circle::new(scale(*p), 1, BLUE.filled()))
                     .map_err(err)?;
             }
-            let Some(c) = proj.pixel(&f.outline.center_point()) else {
+            let Some(c) = proj.pixel(&f.silhouette.outline.center_point()) else {
                 continue;
             };
-            let r = f.outline.radius_px(proj) / k as f64;
+            let r = f.silhouette.outline.radius_px(proj) / k as f64;
             let (cx, cy) = scale(c);
 
             let text = match &f.highlight {
@@ -97,12 +98,16 @@ pub fn write(
                     let a = LightAngles::from_direction(&hl.light);
                     format!(
                         "{} mm: az {:.2}° el {:.2}°",
-                        f.radius_mm,
+                        f.silhouette.radius_mm,
                         a.azimuth.to_degrees(),
                         a.elevation.to_degrees()
                     )
                 }
-                Err(why) => format!("{} mm: no highlight ({})", f.radius_mm, short(why)),
+                Err(why) => format!(
+                    "{} mm: no highlight ({})",
+                    f.silhouette.radius_mm,
+                    short(why)
+                ),
             };
             // Labels alternate below and above the spheres (a row of them does not collide),
             // kept inside the frame.

@@ -308,31 +308,8 @@ fn diligent_ball_lights() {
     let Some(data) = common::shared_data() else {
         return;
     };
-    let ball = data.join("diligent-ball");
-    let names: Vec<String> = std::fs::read_to_string(ball.join("filenames.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.trim().to_string())
-        .collect();
-    let truth: Vec<[f64; 3]> = std::fs::read_to_string(ball.join("light_directions.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-            [v[0], -v[1], -v[2]]
-        })
-        .collect();
     let dir = tempfile::tempdir().unwrap();
-    let session = serde_json::json!({
-        "schema": "workbench.session/1",
-        "light": "per-image",
-        "images": names.iter().map(|n| serde_json::json!({
-            "file": ball.join(n).display().to_string(), "spheres": [{"radius_mm": 20.0}]
-        })).collect::<Vec<_>>()
-    });
-    std::fs::write(dir.path().join("session.json"), session.to_string()).unwrap();
+    let (_, truth) = common::diligent_session(&data.join("diligent-ball"), dir.path());
     let d = run(dir.path()).unwrap();
     let mut errs: Vec<f64> = d
         .images

@@ -5,26 +5,15 @@ mod common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use workbench::model::{
-    idx, Geometry, LightAngles, Material, Model, Params, SpecularParams, N_PARAMS,
-};
+use workbench::model::{idx, Geometry, Model, Params, SpecularParams, N_PARAMS};
 use workbench::solver::{self, from_unbounded, to_unbounded, Obs, Problem};
 
+/// The material and light of the synthetic sessions.
 fn truth() -> Params {
+    let cfg = workbench::synth::session::SessionConfig::default();
     Params {
-        material: Material {
-            sigma0_mm: [4.0, 3.0, 2.2],
-            albedo: [0.8, 0.62, 0.45],
-            eta: 1.44,
-            specular: SpecularParams {
-                ks: 1.0,
-                alpha: 0.1,
-            },
-        },
-        light: LightAngles {
-            azimuth: 70f64.to_radians(),
-            elevation: 20f64.to_radians(),
-        },
+        material: cfg.material,
+        light: cfg.light,
     }
 }
 

@@ -79,3 +79,37 @@ pub fn shared_data() -> Option<std::path::PathBuf> {
         None
     }
 }
+
+/// A `session.json` in `dir` for DiLiGenT's ball photos in `ball` (one light per photo, no
+/// intrinsics, nothing else given), and the calibrated light directions converted to the camera
+/// frame (theirs: x right, y up, z toward the camera). Also the photos' file names.
+pub fn diligent_session(
+    ball: &std::path::Path,
+    dir: &std::path::Path,
+) -> (Vec<String>, Vec<[f64; 3]>) {
+    let lines = |f: &str| -> Vec<String> {
+        std::fs::read_to_string(ball.join(f))
+            .unwrap()
+            .lines()
+            .map(|l| l.trim().to_string())
+            .filter(|l| !l.is_empty())
+            .collect()
+    };
+    let names = lines("filenames.txt");
+    let truth = lines("light_directions.txt")
+        .iter()
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            [v[0], -v[1], -v[2]]
+        })
+        .collect();
+    let session = serde_json::json!({
+        "schema": "workbench.session/1",
+        "light": "per-image",
+        "images": names.iter().map(|n| serde_json::json!({
+            "file": ball.join(n).display().to_string(), "spheres": [{"radius_mm": 20.0}]
+        })).collect::<Vec<_>>()
+    });
+    std::fs::write(dir.join("session.json"), session.to_string()).unwrap();
+    (names, truth)
+}
