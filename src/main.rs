@@ -181,6 +181,12 @@ struct SessionArgs {
     /// GGX roughness.
     #[arg(long, default_value_t = 0.1)]
     alpha: f64,
+    /// Model extension q: σ = (σ0/r)·(25 mm/r)^q (0: the plain CDRF).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    sigma_exponent: f64,
+    /// Model extension b: albedo·exp(b·(25 mm/r − 1)) (0: one albedo for all radii).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    albedo_curvature: f64,
     /// Material name written into session.json.
     #[arg(long, default_value = "synthetic wax")]
     material: String,
@@ -307,6 +313,8 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
                 ks: a.ks,
                 alpha: a.alpha,
             },
+            sigma_exponent: a.sigma_exponent,
+            albedo_curvature: a.albedo_curvature,
         },
         material_name: a.material,
         exposure: a.exposure,

@@ -1,11 +1,16 @@
 //! The radiance model workbench fits, per colour channel c:
 //!
-//!     L_c = a_c · T(φ; η) · f(θ; σ0_c / r)  +  ks · D · G · F(l·h; η) / (4 n·v)
+//!     L_c = a_c(r) · T(φ; η) · f(θ; σ_c(r))  +  ks · D · G · F(l·h; η) / (4 n·v)
+//!     σ_c(r) = (σ0_c / r) · (r_ref / r)^q,     a_c(r) = a_c · exp(b · (r_ref / r − 1))
 //!
 //! with θ = angle(n, l), φ = angle(n, v), f the CDRF ([`crate::cdrf`]), T = 1 − F the exact
 //! exit-side Fresnel transmission ([`crate::fresnel`]), and the GGX lobe ([`crate::specular`]).
 //! The light's irradiance is folded into a_c and ks. The light direction is two angles
 //! ([`LightAngles`]). Parameters are physical here; the solver maps them to unbounded ones.
+//!
+//! q (`sigma_exponent`) and b (`albedo_curvature`) are extensions of the plain CDRF (both 0):
+//! q > 0 makes σ·r grow as r shrinks, b > 0 makes small spheres brighter. The reference radius
+//! r_ref ([`Model::reference_radius_mm`]) is where σ0 and the albedo keep their plain meaning.
 
 use crate::cdrf::{self, Convolution};
 use crate::fresnel;
@@ -13,8 +18,9 @@ use crate::specular;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-/// Number of model parameters: σ0 ×3, albedo ×3, η, ks, α, light azimuth, light elevation.
-pub const N_PARAMS: usize = 11;
+/// Number of model parameters: σ0 ×3, albedo ×3, η, ks, α, light azimuth, light elevation,
+/// and the two extensions q and b.
+pub const N_PARAMS: usize = 13;
 /// Parameter indices into a gradient row.
 pub mod idx {
     pub const SIGMA0: usize = 0; // .. 3
@@ -24,6 +30,8 @@ pub mod idx {
     pub const ALPHA: usize = 8;
     pub const AZIMUTH: usize = 9;
     pub const ELEVATION: usize = 10;
+    pub const SIGMA_EXPONENT: usize = 11;
+    pub const ALBEDO_CURVATURE: usize = 12;
 }
 /// Human-readable parameter names, in index order.
 pub const PARAM_NAMES: [&str; N_PARAMS] = [
@@ -38,6 +46,8 @@ pub const PARAM_NAMES: [&str; N_PARAMS] = [
     "alpha",
     "light_azimuth",
     "light_elevation",
+    "sigma_exponent",
+    "albedo_curvature",
 ];
 
 /// Material parameters, named as in `truth.json` and `fit.json`.
@@ -50,6 +60,16 @@ pub struct Material {
     /// Index of refraction.
     pub eta: f64,
     pub specular: SpecularParams,
+    /// Extension q: σ = (σ0 / r) · (r_ref / r)^q (0: the plain CDRF).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub sigma_exponent: f64,
+    /// Extension b: albedo · exp(b · (r_ref / r − 1)) (0: the same albedo at every radius).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub albedo_curvature: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -119,6 +139,8 @@ impl Params {
             m.specular.alpha,
             self.light.azimuth,
             self.light.elevation,
+            m.sigma_exponent,
+            m.albedo_curvature,
         ]
     }
 
@@ -132,6 +154,8 @@ impl Params {
                     ks: p[7],
                     alpha: p[8],
                 },
+                sigma_exponent: p[11],
+                albedo_curvature: p[12],
             },
             light: LightAngles {
                 azimuth: p[9],
@@ -150,9 +174,27 @@ pub struct Geometry {
 }
 
 /// The radiance model with its structural choices.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Model {
     pub convolution: Convolution,
+    /// r_ref of the extensions (mm).
+    pub reference_radius_mm: f64,
+    /// Multiply the diffuse term by the exit transmission T(φ) (the paper's baseline divides the
+    /// data by it instead and turns this off).
+    pub exit_fresnel: bool,
+}
+
+/// The reference radius of the extensions: the middle of the usual 15–35 mm sphere sets.
+pub const REFERENCE_RADIUS_MM: f64 = 25.0;
+
+impl Default for Model {
+    fn default() -> Self {
+        Model {
+            convolution: Convolution::default(),
+            reference_radius_mm: REFERENCE_RADIUS_MM,
+            exit_fresnel: true,
+        }
+    }
 }
 
 /// Model output for one pixel: RGB radiance and, optionally, ∂L_c/∂p for every parameter.
@@ -182,8 +224,20 @@ impl Model {
         let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
         let lv = l.dot(&g.view).clamp(-1.0, 1.0);
         let theta = nl.acos();
-        let fr = fresnel::eval(nv, m.eta);
+        let fr = if self.exit_fresnel {
+            fresnel::eval(nv, m.eta)
+        } else {
+            fresnel::FresnelEval {
+                reflectance: 0.0,
+                d_cos: 0.0,
+                d_eta: 0.0,
+            }
+        };
         let t_exit = fr.transmission();
+        let rr = self.reference_radius_mm / g.radius_mm;
+        let ln_rr = rr.ln();
+        let sigma_scale = rr.powf(m.sigma_exponent);
+        let albedo_scale = (m.albedo_curvature * (rr - 1.0)).exp();
         let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
         let (dl_da, dl_de) = if want_grad {
             p.light.jacobian()
@@ -191,20 +245,23 @@ impl Model {
             Default::default()
         };
         for c in 0..3 {
-            let sigma = m.sigma0_mm[c] / g.radius_mm;
+            let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
             let f = cdrf::eval(theta, sigma, self.convolution);
-            out[c] = m.albedo[c] * t_exit * f.value + spec.value;
+            let a = m.albedo[c] * albedo_scale;
+            out[c] = a * t_exit * f.value + spec.value;
             if !want_grad {
                 continue;
             }
             let row = &mut grad[c];
-            row[idx::SIGMA0 + c] = m.albedo[c] * t_exit * f.d_sigma / g.radius_mm;
-            row[idx::ALBEDO + c] = t_exit * f.value;
-            row[idx::ETA] = -m.albedo[c] * f.value * fr.d_eta + spec.d_eta;
+            row[idx::SIGMA0 + c] = a * t_exit * f.d_sigma * sigma / m.sigma0_mm[c];
+            row[idx::ALBEDO + c] = albedo_scale * t_exit * f.value;
+            row[idx::ETA] = -a * f.value * fr.d_eta + spec.d_eta;
             row[idx::KS] = spec.d_ks;
             row[idx::ALPHA] = spec.d_alpha;
+            row[idx::SIGMA_EXPONENT] = a * t_exit * f.d_sigma * sigma * ln_rr;
+            row[idx::ALBEDO_CURVATURE] = a * t_exit * f.value * (rr - 1.0);
             // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
-            let d_nl = m.albedo[c] * t_exit * f.d_cos(theta) + spec.d_nl;
+            let d_nl = a * t_exit * f.d_cos(theta) + spec.d_nl;
             let dl = g.normal * d_nl + g.view * spec.d_lv;
             row[idx::AZIMUTH] = dl.dot(&dl_da);
             row[idx::ELEVATION] = dl.dot(&dl_de);

@@ -3,7 +3,8 @@
 //! from the model's analytic gradient, and standard errors and correlations from σ²(JᵀJ)⁻¹.
 //!
 //! Unbounded parameters u: ln σ0 (×3), ln albedo (×3), ln(η − 1), ln ks, ln α, and the light's
-//! azimuth and elevation as they are. Parameters not free are held at their given value.
+//! azimuth and elevation as they are, and the model extensions q and b as they are. Parameters
+//! not free are held at their given value; a [`Prior`] adds a residual (p − mean)/std.
 
 use crate::model::{Geometry, Model, Params, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -40,6 +41,14 @@ pub fn from_unbounded(u: &[f64; N_PARAMS]) -> ([f64; N_PARAMS], [f64; N_PARAMS])
     (p, d)
 }
 
+/// A Gaussian prior on one parameter (physical units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prior {
+    pub index: usize,
+    pub mean: f64,
+    pub std: f64,
+}
+
 /// The least-squares problem over the free parameters.
 pub struct Problem<'a> {
     pub model: Model,
@@ -48,6 +57,10 @@ pub struct Problem<'a> {
     pub free: [bool; N_PARAMS],
     /// Current unbounded values of all parameters.
     pub u: [f64; N_PARAMS],
+    /// Priors on free parameters (one residual each, after the observations').
+    pub priors: Vec<Prior>,
+    /// When set, the cost ½Σr² of every residual evaluation (trial steps included) is recorded.
+    pub history: Option<std::sync::Mutex<Vec<f64>>>,
 }
 
 impl Problem<'_> {
@@ -84,12 +97,70 @@ impl Problem<'_> {
                 (r, j)
             })
             .collect();
-        let m = 3 * self.obs.len();
-        let res = DVector::from_iterator(m, rows.iter().flat_map(|(r, _)| r.iter().cloned()));
+        let priors: Vec<&Prior> = self.priors.iter().filter(|q| self.free[q.index]).collect();
+        let m = 3 * self.obs.len() + priors.len();
+        let prior_res = priors.iter().map(|q| (p[q.index] - q.mean) / q.std);
+        let res = DVector::from_iterator(
+            m,
+            rows.iter()
+                .flat_map(|(r, _)| r.iter().cloned())
+                .chain(prior_res),
+        );
         let jac = want_jacobian.then(|| {
-            DMatrix::from_row_iterator(m, n, rows.iter().flat_map(|(_, j)| j.iter().cloned()))
+            let prior_rows = priors.iter().flat_map(|q| {
+                free.iter()
+                    .map(move |&k| if k == q.index { dpdu[k] / q.std } else { 0.0 })
+            });
+            DMatrix::from_row_iterator(
+                m,
+                n,
+                rows.iter()
+                    .flat_map(|(_, j)| j.iter().cloned())
+                    .chain(prior_rows),
+            )
         });
         (res, jac)
+    }
+}
+
+impl Problem<'_> {
+    /// Standard errors (physical units, 0 for parameters not free) and the correlation matrix of
+    /// the free parameters at the current values, from σ²(JᵀJ)⁻¹ with σ² = 2·cost/(m − n) over
+    /// the observation rows (the prior rows are already in units of their σ); and the cost
+    /// ½Σr² of the observations.
+    pub fn covariance(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64) {
+        let dpdu = from_unbounded(&self.u).1;
+        let (res, jac) = self.evaluate(true);
+        let m_obs = 3 * self.obs.len();
+        let idx = self.free_idx();
+        let n = idx.len();
+        let cost = 0.5 * res.rows(0, m_obs).norm_squared();
+        let sigma2 = 2.0 * cost / (m_obs.saturating_sub(n).max(1)) as f64;
+        let mut std = [0.0; N_PARAMS];
+        let mut correlation = DMatrix::zeros(n, n);
+        let jac = jac.map(|mut j| {
+            let s = sigma2.max(1e-300).sqrt();
+            for r in 0..m_obs {
+                for c in 0..n {
+                    j[(r, c)] /= s;
+                }
+            }
+            j
+        });
+        if let Some(cov) = jac.and_then(|j| (j.transpose() * &j).try_inverse()) {
+            for (a, &k) in idx.iter().enumerate() {
+                // Unbounded → physical: σ_p = |dp/du| σ_u.
+                std[k] = cov[(a, a)].max(0.0).sqrt() * dpdu[k].abs();
+                for b in 0..n {
+                    correlation[(a, b)] = cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt();
+                }
+            }
+        } else {
+            for &k in &idx {
+                std[k] = f64::INFINITY;
+            }
+        }
+        (std, correlation, cost)
     }
 }
 
@@ -111,7 +182,13 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn residuals(&self) -> Option<DVector<f64>> {
         let r = self.evaluate(false).0;
-        r.iter().all(|v| v.is_finite()).then_some(r)
+        let ok = r.iter().all(|v| v.is_finite());
+        if let Some(h) = &self.history {
+            h.lock()
+                .expect("history lock")
+                .push(if ok { 0.5 * r.norm_squared() } else { f64::NAN });
+        }
+        ok.then_some(r)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
@@ -129,111 +206,139 @@ pub struct Fit {
     pub std: [f64; N_PARAMS],
     /// Correlation matrix of the free parameters (in model index order).
     pub correlation: DMatrix<f64>,
-    /// ½ Σ r² at the solution, and the number of residuals.
+    /// ½ Σ r² at the solution (observations only, priors excluded), and the number of
+    /// observation residuals.
     pub cost: f64,
     pub residuals: usize,
     pub evaluations: usize,
     pub termination: String,
     pub converged: bool,
+    /// Cost at every residual evaluation, trial steps included.
+    pub history: Vec<f64>,
 }
 
-/// Fit the free parameters from `start`.
-pub fn fit(model: Model, obs: &[Obs], start: &Params, free: [bool; N_PARAMS]) -> Fit {
+/// Fit the free parameters from `start` (with priors on some of them).
+pub fn fit(
+    model: Model,
+    obs: &[Obs],
+    start: &Params,
+    free: [bool; N_PARAMS],
+    priors: &[Prior],
+) -> Fit {
     let problem = Problem {
         model,
         obs,
         free,
         u: to_unbounded(&start.to_vec()),
+        priors: priors.to_vec(),
+        history: Some(std::sync::Mutex::new(vec![])),
     };
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(200)
         .minimize(problem);
-    let (p, dpdu) = from_unbounded(&problem.u);
-    let (res, jac) = problem.evaluate(true);
-    let m = res.len();
-    let idx = problem.free_idx();
-    let n = idx.len();
-    let cost = 0.5 * res.norm_squared();
-    let sigma2 = 2.0 * cost / (m.saturating_sub(n).max(1)) as f64;
-    let mut std = [0.0; N_PARAMS];
-    let mut correlation = DMatrix::zeros(n, n);
-    if let Some(cov) = jac.and_then(|j| (j.transpose() * &j).try_inverse()) {
-        let cov = cov * sigma2;
-        for (a, &k) in idx.iter().enumerate() {
-            // Unbounded → physical: σ_p = |dp/du| σ_u.
-            std[k] = cov[(a, a)].max(0.0).sqrt() * dpdu[k].abs();
-            for b in 0..n {
-                correlation[(a, b)] = cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt();
-            }
-        }
-    } else {
-        std = [f64::INFINITY; N_PARAMS];
-    }
+    let p = from_unbounded(&problem.u).0;
+    let (std, correlation, cost) = problem.covariance();
+    let m_obs = 3 * obs.len();
+    let history = problem
+        .history
+        .map(|h| h.into_inner().unwrap_or_default())
+        .unwrap_or_default();
+    let finite = p.iter().all(|v| v.is_finite()) && cost.is_finite();
     Fit {
         params: Params::from_vec(&p),
         free,
         std,
         correlation,
         cost,
-        residuals: m,
+        residuals: m_obs,
         evaluations: report.number_of_evaluations,
         termination: format!("{:?}", report.termination),
-        converged: report.termination.was_successful(),
+        converged: report.termination.was_successful() && finite,
+        history,
     }
 }
 
-/// A fit with the Huber loss, by iteratively reweighted least squares around [`fit`]: residuals
-/// are scaled by a robust σ (1.4826 × their median absolute value), those beyond `k` σ get weight
-/// k/|r| (their square root multiplies the channel weight), and the fit is repeated from its own
-/// result until no weight changes by more than 1% (at most `rounds` times). Returns the final fit
-/// and the observations with their final weights.
+/// Robust weights of the Huber loss: residuals scaled by a robust σ (1.4826 × their median
+/// absolute value); those beyond `k` σ get weight k/|r| (its square root multiplies the channel
+/// weight). Returns the reweighted observations, how many channel residuals were down-weighted,
+/// and whether any weight moved by more than 1% from `current`.
+pub fn huber_weights(
+    model: &Model,
+    obs: &[Obs],
+    current: &[Obs],
+    p: &Params,
+    k: f64,
+) -> (Vec<Obs>, usize, bool) {
+    let probe = Problem {
+        model: *model,
+        obs,
+        free: [false; N_PARAMS],
+        u: to_unbounded(&p.to_vec()),
+        priors: vec![],
+        history: None,
+    };
+    let (res, _) = probe.evaluate(false);
+    let mut abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
+    if abs.is_empty() {
+        return (obs.to_vec(), 0, false);
+    }
+    abs.sort_by(|a, b| a.total_cmp(b));
+    let sigma = 1.4826 * abs[abs.len() / 2];
+    let mut changed = false;
+    let mut down = 0;
+    let next = obs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let mut o2 = *o;
+            for c in 0..3 {
+                let z = res[3 * i + c].abs() / sigma.max(1e-300);
+                let w = if z > k {
+                    down += 1;
+                    (k / z).sqrt()
+                } else {
+                    1.0
+                };
+                o2.weight[c] = o.weight[c] * w;
+                if (o2.weight[c] - current[i].weight[c]).abs() > 0.01 * o.weight[c].max(1e-300) {
+                    changed = true;
+                }
+            }
+            o2
+        })
+        .collect();
+    (next, down, changed)
+}
+
+/// A fit with the Huber loss, by iteratively reweighted least squares around [`fit`]
+/// ([`huber_weights`]), repeated from its own result until no weight changes by more than 1%
+/// (at most `rounds` times). Returns the final fit, the observations with their final weights
+/// and the number of down-weighted channel residuals.
 pub fn fit_robust(
     model: Model,
     obs: &[Obs],
     start: &Params,
     free: [bool; N_PARAMS],
+    priors: &[Prior],
     k: f64,
     rounds: usize,
-) -> (Fit, Vec<Obs>) {
+) -> (Fit, Vec<Obs>, usize) {
     let mut current: Vec<Obs> = obs.to_vec();
-    let mut f = fit(model, &current, start, free);
+    let mut f = fit(model, &current, start, free, priors);
+    let mut down = 0;
     for _ in 0..rounds {
-        let probe = Problem {
-            model,
-            obs,
-            free,
-            u: to_unbounded(&f.params.to_vec()),
-        };
-        let (res, _) = probe.evaluate(false);
-        let mut abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
-        if abs.is_empty() {
-            break;
-        }
-        abs.sort_by(|a, b| a.total_cmp(b));
-        let sigma = 1.4826 * abs[abs.len() / 2];
-        let mut changed = false;
-        let next: Vec<Obs> = obs
-            .iter()
-            .enumerate()
-            .map(|(i, o)| {
-                let mut o2 = *o;
-                for c in 0..3 {
-                    let z = res[3 * i + c].abs() / sigma.max(1e-300);
-                    let w = if z > k { (k / z).sqrt() } else { 1.0 };
-                    o2.weight[c] = o.weight[c] * w;
-                    if (o2.weight[c] - current[i].weight[c]).abs() > 0.01 * o.weight[c].max(1e-300)
-                    {
-                        changed = true;
-                    }
-                }
-                o2
-            })
-            .collect();
+        let (next, d, changed) = huber_weights(&model, obs, &current, &f.params, k);
+        down = d;
         current = next;
         if !changed {
             break;
         }
-        f = fit(model, &current, &f.params, free);
+        let mut history = std::mem::take(&mut f.history);
+        let evaluations = f.evaluations;
+        f = fit(model, &current, &f.params, free, priors);
+        history.extend(&f.history);
+        f.history = history;
+        f.evaluations += evaluations;
     }
-    (f, current)
+    (f, current, down)
 }

@@ -168,6 +168,9 @@ fn params(az: f64, el: f64) -> Params {
                 ks: 1.0,
                 alpha: 0.15,
             },
+            // Non-zero extensions, so their derivatives are checked too.
+            sigma_exponent: 0.4,
+            albedo_curvature: 0.1,
         },
         light: LightAngles {
             azimuth: az,
@@ -211,7 +214,10 @@ fn model_gradient_matches_finite_differences() {
     ];
     let mut checked = 0;
     for conv in [Convolution::Wrapped, Convolution::Line] {
-        let model = Model { convolution: conv };
+        let model = Model {
+            convolution: conv,
+            ..Model::default()
+        };
         for &(az, el) in &lights {
             let p = params(az, el);
             let l = p.light.direction();
@@ -285,5 +291,5 @@ fn model_pieces_are_what_the_readme_says() {
         radius_mm: 20.0,
     };
     assert_eq!(Model::default().radiance(&p, &g2), [0.0; 3]);
-    assert_eq!(idx::ELEVATION, N_PARAMS - 1);
+    assert_eq!(idx::ALBEDO_CURVATURE, N_PARAMS - 1);
 }

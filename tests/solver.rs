@@ -6,7 +6,16 @@ use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use workbench::model::{idx, Geometry, Model, Params, SpecularParams, N_PARAMS};
-use workbench::solver::{self, from_unbounded, to_unbounded, Obs, Problem};
+use workbench::solver::{self, from_unbounded, to_unbounded, Obs, Prior, Problem};
+
+/// The plain model's parameters free, η and the extensions held.
+fn plain_free() -> [bool; N_PARAMS] {
+    let mut free = [true; N_PARAMS];
+    free[idx::ETA] = false;
+    free[idx::SIGMA_EXPONENT] = false;
+    free[idx::ALBEDO_CURVATURE] = false;
+    free
+}
 
 /// The material and light of the synthetic sessions.
 fn truth() -> Params {
@@ -80,7 +89,15 @@ fn mapping_round_trips_and_its_derivative_matches_differences() {
 
 #[test]
 fn jacobian_matches_finite_differences() {
-    let p = truth();
+    let mut p = truth();
+    // Non-zero extensions, and a prior, so that their rows are checked too.
+    p.material.sigma_exponent = 0.3;
+    p.material.albedo_curvature = 0.1;
+    let priors = vec![Prior {
+        index: idx::ETA,
+        mean: 1.5,
+        std: 0.05,
+    }];
     let obs = observations(&p, &[30.0, 15.0], 40, 0.0, 3);
     let free = [true; N_PARAMS];
     let base = Problem {
@@ -88,8 +105,11 @@ fn jacobian_matches_finite_differences() {
         obs: &obs,
         free,
         u: to_unbounded(&p.to_vec()),
+        priors: priors.clone(),
+        history: None,
     };
     let (_, j) = base.evaluate(true);
+    assert_eq!(j.as_ref().unwrap().nrows(), 3 * obs.len() + 1);
     let j = j.unwrap();
     for k in 0..N_PARAMS {
         for row in (0..j.nrows()).step_by(7) {
@@ -100,6 +120,8 @@ fn jacobian_matches_finite_differences() {
                         obs: &obs,
                         free,
                         u: base.u,
+                        priors: priors.clone(),
+                        history: None,
                     };
                     q.u[k] = t;
                     q.evaluate(false).0[row]
@@ -130,9 +152,8 @@ fn recovers_known_parameters_from_a_bad_start() {
     start.light.azimuth += 10f64.to_radians();
     start.light.elevation -= 8f64.to_radians();
     // η held at its true value: with ks free it is not identifiable (notes §4).
-    let mut free = [true; N_PARAMS];
-    free[idx::ETA] = false;
-    let f = solver::fit(Model::default(), &obs, &start, free);
+    let free = plain_free();
+    let f = solver::fit(Model::default(), &obs, &start, free, &[]);
     assert!(f.converged, "{}", f.termination);
     let (got, want) = (f.params.to_vec(), p.to_vec());
     for k in 0..6 {
@@ -163,7 +184,11 @@ fn recovers_known_parameters_from_a_bad_start() {
     assert!(light < 0.1, "{light}");
     assert!((f.params.material.specular.alpha - 0.1).abs() < 0.01);
     assert_eq!(f.std[idx::ETA], 0.0);
-    assert_eq!(f.correlation.nrows(), N_PARAMS - 1);
+    assert_eq!(f.correlation.nrows(), N_PARAMS - 3);
+    // The cost history ends at the final cost and never ends above its start.
+    assert!(f.history.len() >= f.evaluations.min(2));
+    assert!((f.history.last().unwrap() - f.cost).abs() <= 1e-9 * f.cost.max(1e-12) + 1e-12 || f.history.iter().any(|c| (c - f.cost).abs() < 1e-9 * f.cost));
+    assert!(f.cost < f.history[0]);
 }
 
 #[test]
@@ -174,10 +199,11 @@ fn huber_reweighting_ignores_a_few_bad_pixels() {
     for o in obs.iter_mut().step_by(33) {
         o.radiance = o.radiance.map(|v| 3.0 * v + 0.05);
     }
-    let mut free = [true; N_PARAMS];
-    free[idx::ETA] = false;
-    let plain = solver::fit(Model::default(), &obs, &p, free);
-    let (robust, weights) = solver::fit_robust(Model::default(), &obs, &p, free, 1.345, 8);
+    let free = plain_free();
+    let plain = solver::fit(Model::default(), &obs, &p, free, &[]);
+    let (robust, weights, down) =
+        solver::fit_robust(Model::default(), &obs, &p, free, &[], 1.345, 8);
+    assert!(down >= 3 * (obs.len() / 33), "{down} down-weighted");
     let err = |f: &solver::Fit| {
         (0..6)
             .map(|k| (f.params.to_vec()[k] - p.to_vec()[k]).abs() / p.to_vec()[k])
@@ -197,20 +223,33 @@ fn huber_reweighting_ignores_a_few_bad_pixels() {
 }
 
 #[test]
-fn pooled_cells_fit_like_every_pixel() {
+fn pooled_cells_fit_like_every_pixel_and_the_predicted_shift_says_how_far() {
     let p = truth();
-    let obs = observations(&p, &[35.0, 25.0, 15.0], 20000, 0.01, 21);
-    let mut free = [true; N_PARAMS];
-    free[idx::ETA] = false;
-    let full = solver::fit(Model::default(), &obs, &p, free);
+    let radii = [35.0, 25.0, 15.0];
+    let per = 20000;
+    let obs = observations(&p, &radii, per, 0.01, 21);
+    let free = plain_free();
+    let full = solver::fit(Model::default(), &obs, &p, free, &[]);
     let l = p.light.direction();
-    for deg in [1.0f64, 2.0, 4.0] {
-        let pooled = workbench::reduce::pool(&obs, &l, deg.to_radians(), (3.0f64 * 0.1).atan());
-        let f = solver::fit(Model::default(), &pooled, &p, free);
+    let mut pooled = workbench::reduce::Pooled::new(l, (3.0f64 * 0.1).atan());
+    for (k, chunk) in obs.chunks(per).enumerate() {
+        pooled.add_sphere(k, chunk);
+    }
+    assert_eq!(pooled.pixels, obs.len());
+    let mut measured = vec![];
+    for factor in [2u32, 4, 8, 16] {
+        let deg = factor as f64 * 0.25;
+        let cells = pooled.merged(factor);
+        let reduced = pooled.observations(&cells);
+        // The pixel count and radiance sums are kept exactly.
+        let n: f64 = cells.iter().map(|c| c.n).sum::<f64>() + pooled.kept.len() as f64;
+        assert_eq!(n as usize, obs.len());
+        let f = solver::fit(Model::default(), &reduced, &p, free, &[]);
         // Largest difference from the all-pixel fit, in units of that fit's standard error.
         let z = (0..6)
             .map(|k| (f.params.to_vec()[k] - full.params.to_vec()[k]).abs() / full.std[k])
             .fold(0.0, f64::max);
+        let predicted = pooled.shift(&cells, &Model::default(), &full.params, free);
         let light = f
             .params
             .light
@@ -218,15 +257,56 @@ fn pooled_cells_fit_like_every_pixel() {
             .angle(&full.params.light.direction())
             .to_degrees();
         println!(
-            "cells {deg}°: {} observations from {} ({:.0}×), σ0/albedo within {z:.2} std of the full fit, light {light:.4}°",
-            pooled.len(),
+            "cells {deg}°: {} observations from {} ({:.0}×), σ0/albedo within {z:.2} std of the full fit (predicted shift {predicted:.2} std), light {light:.4}°",
+            reduced.len(),
             obs.len(),
-            obs.len() as f64 / pooled.len() as f64
+            obs.len() as f64 / reduced.len() as f64
         );
-        assert!(pooled.len() < obs.len());
+        assert!(reduced.len() < obs.len());
         if deg <= 1.0 {
             assert!(z < 1.0, "{deg}°: {z}");
             assert!(light < 0.02, "{deg}°: {light}");
         }
+        measured.push((z, predicted));
     }
+    // The prediction grows with the width as the measured shift does, and is of its size where
+    // pooling matters (the measured shift also holds a noise part of order 0.1 std).
+    for w in measured.windows(2) {
+        assert!(w[1].1 > w[0].1, "{measured:?}");
+    }
+    let (z4, p4) = measured[3];
+    assert!(z4 > 1.0 && p4 > 0.5 * z4 && p4 < 2.0 * z4, "4°: measured {z4}, predicted {p4}");
+}
+
+#[test]
+fn a_prior_combines_with_the_data_as_two_gaussians_do() {
+    let p = truth();
+    let mut obs = observations(&p, &[35.0, 25.0, 15.0], 3000, 0.01, 13);
+    // Weights 1/σ of the noise the observations were made with, so that the data's residuals
+    // and the prior's are in the same units.
+    let model = Model::default();
+    for o in obs.iter_mut() {
+        let l = model.radiance(&p, &o.geometry);
+        o.weight = l.map(|v| 1.0 / (0.01f64 * v).hypot(0.002));
+    }
+    let mut free = plain_free();
+    free[idx::ETA] = true;
+    let data = solver::fit(model, &obs, &p, free, &[]);
+    let prior = Prior {
+        index: idx::ETA,
+        mean: 1.5,
+        std: 0.01,
+    };
+    let both = solver::fit(model, &obs, &p, free, &[prior]);
+    let (m1, s1) = (data.params.material.eta, data.std[idx::ETA]);
+    let (w1, w2) = (1.0 / (s1 * s1), 1.0 / (prior.std * prior.std));
+    let mean = (m1 * w1 + prior.mean * w2) / (w1 + w2);
+    let std = (w1 + w2).sqrt().recip();
+    println!(
+        "η from the data {m1:.4} ± {s1:.4}; with the prior 1.5 ± 0.01: {:.4} ± {:.4}; product of the two Gaussians {mean:.4} ± {std:.4}",
+        both.params.material.eta, both.std[idx::ETA]
+    );
+    assert!(both.converged && data.converged);
+    assert!((both.params.material.eta - mean).abs() < 0.2 * std, "posterior mean");
+    assert!((both.std[idx::ETA] / std - 1.0).abs() < 0.1, "posterior std");
 }

@@ -137,6 +137,8 @@ fn png_pixels_match_truth_within_noise() {
             albedo: t.albedo,
             eta: t.eta,
             specular: t.specular,
+            sigma_exponent: t.sigma_exponent,
+            albedo_curvature: t.albedo_curvature,
         },
         light: LightAngles::from_direction(&l),
     };

@@ -108,6 +108,8 @@ impl Default for SessionConfig {
                     ks: 1.0,
                     alpha: 0.1,
                 },
+                sigma_exponent: 0.0,
+                albedo_curvature: 0.0,
             },
             material_name: "synthetic wax".into(),
             convolution: Convolution::Wrapped,
@@ -135,6 +137,11 @@ pub struct SessionTruth {
     pub albedo: [f64; 3],
     pub eta: f64,
     pub specular: SpecularParams,
+    /// Model extensions (see [`crate::model`]); absent: 0.
+    #[serde(default)]
+    pub sigma_exponent: f64,
+    #[serde(default)]
+    pub albedo_curvature: f64,
     /// Unit vector toward the light, camera frame (x right, y down, z forward).
     pub light_direction: [f64; 3],
     pub light_azimuth_deg: f64,
@@ -373,6 +380,7 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     let (w, h) = (cam.width() as usize, cam.height() as usize);
     let model = Model {
         convolution: cfg.convolution,
+        ..Model::default()
     };
     let params = Params {
         material: cfg.material,
@@ -564,6 +572,8 @@ pub fn generate(
         albedo: m.albedo,
         eta: m.eta,
         specular: m.specular,
+        sigma_exponent: m.sigma_exponent,
+        albedo_curvature: m.albedo_curvature,
         light_direction: [l.x, l.y, l.z],
         light_azimuth_deg: cfg.light.azimuth.to_degrees(),
         light_elevation_deg: cfg.light.elevation.to_degrees(),
