@@ -280,9 +280,22 @@ fn model_pieces_are_what_the_readme_says() {
     let th = n.dot(&l).acos();
     let t = 1.0 - fresnel::reflectance(n.dot(&v), 1.44);
     let out = Model::default().radiance(&p, &g);
+    // With the extensions: σ = (σ0/r)(25/r)^q, albedo · exp(b (25/r − 1)).
+    let (q, b) = (p.material.sigma_exponent, p.material.albedo_curvature);
     for c in 0..3 {
-        let f = workbench::cdrf::value(th, p.material.sigma0_mm[c] / 20.0, Convolution::Wrapped);
-        assert!((out[c] - p.material.albedo[c] * t * f).abs() < 1e-15);
+        let sigma = p.material.sigma0_mm[c] / 20.0 * (25.0f64 / 20.0).powf(q);
+        let f = workbench::cdrf::value(th, sigma, Convolution::Wrapped);
+        let a = p.material.albedo[c] * (b * (25.0 / 20.0 - 1.0)).exp();
+        assert!((out[c] - a * t * f).abs() < 1e-15);
+    }
+    // The paper's variant without the exit transmission.
+    let bare = Model {
+        exit_fresnel: false,
+        ..Model::default()
+    }
+    .radiance(&p, &g);
+    for c in 0..3 {
+        assert!((bare[c] * t - out[c]).abs() < 1e-15);
     }
     // Back-facing to the camera: nothing.
     let g2 = Geometry {
