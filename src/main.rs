@@ -34,6 +34,8 @@ enum Command {
     Calibrate(CalibrateArgs),
     /// Find the spheres, highlights and light direction of a session; write detections.json.
     Detect(DetectArgs),
+    /// Fit the material (σ0, albedo, η, specular lobe, light) to a session; write fit.json.
+    Solve(SolveArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -51,6 +53,132 @@ struct DetectArgs {
     /// Do not write the overlay pictures (overlays/<photo>.png beside detections.json).
     #[arg(long)]
     no_overlays: bool,
+}
+
+#[derive(Args)]
+struct SolveArgs {
+    /// The session folder (or its session.json).
+    session: PathBuf,
+    /// One fit across all radii (the default method).
+    #[arg(long, conflicts_with = "method")]
+    joint: bool,
+    /// joint: everything at once; paper: the source paper's per-radius baseline.
+    #[arg(long, value_enum, default_value_t = MethodArg::Joint)]
+    method: MethodArg,
+    /// Where to write fit.json (default: beside session.json).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Fit without the spheres of this radius (mm), then report how well the fit predicts them.
+    #[arg(long, allow_hyphen_values = true)]
+    holdout: Option<f64>,
+    /// Prior on a parameter, NAME=MEAN:STD; only eta (default eta=1.45:0.05).
+    #[arg(long, value_parser = parse_prior)]
+    prior: Option<(f64, f64)>,
+    /// The light's irradiance in the photos' radiance units (pixel value / exposure): makes the
+    /// specular scale known (ks = E), so η is fitted instead of held at its prior.
+    #[arg(long, allow_hyphen_values = true)]
+    irradiance: Option<f64>,
+    /// Pixel reduction: auto (the coarsest cells whose predicted parameter shift stays below 0.3
+    /// standard errors), none (every pixel), or a cell width in degrees: 0.25, 0.5, 1, 2, 4.
+    #[arg(long, default_value = "auto", value_parser = parse_reduce)]
+    reduce: workbench::joint::Reduction,
+    /// Plain least squares instead of the Huber loss.
+    #[arg(long)]
+    no_robust: bool,
+    /// Model extensions: none, auto (chosen by held-out error; needs 4 or more radii),
+    /// sigma-exponent, albedo-curvature, or both (comma-separated).
+    #[arg(long, default_value = "none", value_parser = parse_extensions)]
+    extensions: workbench::solve::ExtensionChoice,
+    /// Start σ0 (mm), one value or r,g,b, instead of the search over the data.
+    #[arg(long, value_parser = triple)]
+    start_sigma0: Option<[f64; 3]>,
+    /// Start light as azimuth,elevation in degrees, instead of the detector's.
+    #[arg(long, value_parser = pair, allow_hyphen_values = true)]
+    start_light: Option<[f64; 2]>,
+    /// Run detection even when detections.json is newer than its inputs.
+    #[arg(long)]
+    redetect: bool,
+    /// Write figures (PNG and SVG) into this folder.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    Joint,
+    Paper,
+}
+
+fn parse_prior(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (name, rest) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=MEAN:STD, got {s:?}"))?;
+    if name.trim() != "eta" {
+        return Err(format!("priors are offered for eta only, got {name:?}"));
+    }
+    let (m, sd) = rest
+        .split_once(':')
+        .ok_or_else(|| format!("expected eta=MEAN:STD, got {s:?}"))?;
+    let m: f64 = m.trim().parse().map_err(|_| format!("bad mean {m:?}"))?;
+    let sd: f64 = sd.trim().parse().map_err(|_| format!("bad std {sd:?}"))?;
+    if !(m > 1.0 && m < 4.0 && sd > 0.0 && sd.is_finite()) {
+        return Err(format!("need 1 < mean < 4 and std > 0, got {m}:{sd}"));
+    }
+    Ok((m, sd))
+}
+
+fn parse_reduce(s: &str) -> std::result::Result<workbench::joint::Reduction, String> {
+    use workbench::joint::Reduction;
+    match s {
+        "auto" => Ok(Reduction::Auto),
+        "none" | "0" => Ok(Reduction::None),
+        _ => {
+            let w: f64 = s.parse().map_err(|_| format!("expected auto, none or degrees, got {s:?}"))?;
+            let f = (w / 0.25).round() as u32;
+            if workbench::reduce::FACTORS.contains(&f) && (f as f64 * 0.25 - w).abs() < 1e-9 {
+                Ok(Reduction::Factor(f))
+            } else {
+                Err(format!("cell width must be 0.25, 0.5, 1, 2 or 4 degrees, got {s}"))
+            }
+        }
+    }
+}
+
+fn parse_extensions(s: &str) -> std::result::Result<workbench::solve::ExtensionChoice, String> {
+    use workbench::joint::Extensions;
+    use workbench::solve::ExtensionChoice;
+    match s {
+        "none" => return Ok(ExtensionChoice::None),
+        "auto" => return Ok(ExtensionChoice::Auto),
+        "both" => {
+            return Ok(ExtensionChoice::On(Extensions {
+                sigma_exponent: true,
+                albedo_curvature: true,
+            }))
+        }
+        _ => {}
+    }
+    let mut e = Extensions::default();
+    for part in s.split(',') {
+        match part.trim() {
+            "sigma-exponent" => e.sigma_exponent = true,
+            "albedo-curvature" => e.albedo_curvature = true,
+            other => return Err(format!("unknown extension {other:?} (sigma-exponent, albedo-curvature)")),
+        }
+    }
+    Ok(ExtensionChoice::On(e))
+}
+
+fn pair(s: &str) -> std::result::Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("expected two numbers a,b, got {s:?}"))?;
+    match v.as_slice() {
+        [a, b] if a.is_finite() && b.is_finite() => Ok([*a, *b]),
+        _ => Err(format!("expected two numbers a,b, got {s:?}")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -570,6 +698,57 @@ fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
+    use workbench::solve::{self, Method, Options};
+    let _ = a.joint;
+    let mut o = Options::new(&a.session);
+    o.out = a.out.clone();
+    o.method = match a.method {
+        MethodArg::Joint => Method::Joint,
+        MethodArg::Paper => Method::Paper,
+    };
+    o.holdout = a.holdout;
+    if let Some(p) = a.prior {
+        o.eta_prior = p;
+    }
+    if let Some(e) = a.irradiance {
+        if !(e.is_finite() && e > 0.0) {
+            bail!("--irradiance must be a positive number, got {e}");
+        }
+        o.irradiance = Some(e);
+    }
+    o.reduction = a.reduce;
+    o.robust = !a.no_robust;
+    o.extensions = a.extensions;
+    if let Some(s) = a.start_sigma0 {
+        if s.iter().any(|v| !(*v > 0.0)) {
+            bail!("--start-sigma0 must be positive");
+        }
+    }
+    o.start_sigma0 = a.start_sigma0;
+    o.start_light = a.start_light.map(|[az, el]| LightAngles {
+        azimuth: az.to_radians(),
+        elevation: el.to_radians(),
+    });
+    o.redetect = a.redetect;
+    o.plots = a.plots.clone();
+    o.quiet = quiet;
+    let f = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;
+    print!("{}", solve::summary(&f));
+    let out = a
+        .out
+        .unwrap_or_else(|| std::path::Path::new(&f.session).with_file_name("fit.json"));
+    println!("wrote    {}", out.display());
+    if let Some(d) = &a.plots {
+        println!("figures  {}", d.display());
+    }
+    if !f.convergence.converged {
+        eprintln!("error: the fit did not converge (see convergence in {})", out.display());
+        std::process::exit(3);
+    }
+    Ok(())
+}
+
 fn check(session: PathBuf) -> Result<()> {
     let r = workbench::session::inspect(&session)?;
     println!("session  {}", r.session_file.display());
@@ -646,6 +825,7 @@ fn main() {
         Command::Synth(Synth::Session(a)) => synth_session(a, cli.quiet),
         Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
         Command::Detect(a) => detect(a, cli.quiet),
+        Command::Solve(a) => solve(a, cli.quiet),
         Command::Check { session } => check(session),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate(a, cli.quiet),

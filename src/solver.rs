@@ -130,24 +130,22 @@ impl Problem<'_> {
     /// ½Σr² of the observations.
     pub fn covariance(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64) {
         let dpdu = from_unbounded(&self.u).1;
-        let (res, jac) = self.evaluate(true);
-        let m_obs = 3 * self.obs.len();
         let idx = self.free_idx();
         let n = idx.len();
-        let cost = 0.5 * res.rows(0, m_obs).norm_squared();
-        let sigma2 = 2.0 * cost / (m_obs.saturating_sub(n).max(1)) as f64;
+        let m_obs = 3 * self.obs.len();
+        // The prior rows' part of JᵀJ, to be left unscaled.
+        let mut prior_part = DMatrix::zeros(n, n);
+        for q in self.priors.iter().filter(|q| self.free[q.index]) {
+            let i = idx.iter().position(|&k| k == q.index).expect("free");
+            prior_part[(i, i)] += (dpdu[q.index] / q.std).powi(2);
+        }
+        let ne = self.normal_equations();
+        let cost = 0.5 * ne.rtr_obs;
+        let sigma2 = (2.0 * cost / (m_obs.saturating_sub(n).max(1)) as f64).max(1e-300);
+        let info = (&ne.jtj - &prior_part) / sigma2 + &prior_part;
         let mut std = [0.0; N_PARAMS];
         let mut correlation = DMatrix::zeros(n, n);
-        let jac = jac.map(|mut j| {
-            let s = sigma2.max(1e-300).sqrt();
-            for r in 0..m_obs {
-                for c in 0..n {
-                    j[(r, c)] /= s;
-                }
-            }
-            j
-        });
-        if let Some(cov) = jac.and_then(|j| (j.transpose() * &j).try_inverse()) {
+        if let Some(cov) = ne.finite.then(|| info.try_inverse()).flatten() {
             for (a, &k) in idx.iter().enumerate() {
                 // Unbounded → physical: σ_p = |dp/du| σ_u.
                 std[k] = cov[(a, a)].max(0.0).sqrt() * dpdu[k].abs();
@@ -161,6 +159,168 @@ impl Problem<'_> {
             }
         }
         (std, correlation, cost)
+    }
+}
+
+/// The normal equations of the weighted problem: JᵀJ, Jᵀr and rᵀr (observations and priors).
+#[derive(Clone, Debug)]
+pub struct Normal {
+    pub jtj: DMatrix<f64>,
+    pub jtr: DVector<f64>,
+    /// rᵀr of the observation rows and of the prior rows.
+    pub rtr_obs: f64,
+    pub rtr_prior: f64,
+    pub finite: bool,
+}
+
+impl Problem<'_> {
+    /// Accumulate the normal equations in parallel (chunks of observations), without forming J.
+    pub fn normal_equations(&self) -> Normal {
+        let (p, dpdu) = from_unbounded(&self.u);
+        let params = Params::from_vec(&p);
+        let free = self.free_idx();
+        let n = free.len();
+        let zero = || (DMatrix::<f64>::zeros(n, n), DVector::<f64>::zeros(n), 0.0f64);
+        let (mut jtj, mut jtr, rtr) = self
+            .obs
+            .par_chunks(2048)
+            .map(|chunk| {
+                let (mut a, mut b, mut c) = zero();
+                let mut g = vec![0.0; n];
+                for o in chunk {
+                    let (l, grad) = self.model.radiance_with_gradient(&params, &o.geometry);
+                    for ch in 0..3 {
+                        let w = o.weight[ch];
+                        if w == 0.0 {
+                            continue;
+                        }
+                        let r = w * (l[ch] - o.radiance[ch]);
+                        for (i, &k) in free.iter().enumerate() {
+                            g[i] = w * grad[ch][k] * dpdu[k];
+                        }
+                        for i in 0..n {
+                            b[i] += g[i] * r;
+                            for j in 0..=i {
+                                a[(i, j)] += g[i] * g[j];
+                            }
+                        }
+                        c += r * r;
+                    }
+                }
+                (a, b, c)
+            })
+            .reduce(zero, |(a1, b1, c1), (a2, b2, c2)| (a1 + a2, b1 + b2, c1 + c2));
+        for i in 0..n {
+            for j in 0..i {
+                jtj[(j, i)] = jtj[(i, j)];
+            }
+        }
+        let mut rtr_prior = 0.0;
+        for q in self.priors.iter().filter(|q| self.free[q.index]) {
+            let r = (p[q.index] - q.mean) / q.std;
+            let i = free.iter().position(|&k| k == q.index).expect("free");
+            let g = dpdu[q.index] / q.std;
+            jtj[(i, i)] += g * g;
+            jtr[i] += g * r;
+            rtr_prior += r * r;
+        }
+        let finite = rtr.is_finite() && jtj.iter().all(|v| v.is_finite());
+        Normal {
+            jtj,
+            jtr,
+            rtr_obs: rtr,
+            rtr_prior,
+            finite,
+        }
+    }
+}
+
+/// The same least-squares problem, reduced to n + 1 residuals: with JᵀJ = RᵀR (Cholesky), the
+/// residuals r̃ = (R⁻ᵀJᵀr, √(rᵀr − ‖R⁻ᵀJᵀr‖²)) and the Jacobian (R; 0) have the same norm, the
+/// same gradient Jᵀr and the same JᵀJ as the full problem, so Levenberg–Marquardt takes the same
+/// steps — but its QR costs O(n³) instead of O(m·n²) and J (m × n) is never stored. The normal
+/// equations are accumulated in parallel ([`Problem::normal_equations`]).
+pub struct Reduced<'a> {
+    pub problem: Problem<'a>,
+    cache: Option<(DVector<f64>, DMatrix<f64>)>,
+}
+
+impl<'a> Reduced<'a> {
+    pub fn new(problem: Problem<'a>) -> Self {
+        let mut r = Reduced {
+            problem,
+            cache: None,
+        };
+        r.refresh();
+        r
+    }
+
+    fn refresh(&mut self) {
+        let ne = self.problem.normal_equations();
+        let rtr = ne.rtr_obs + ne.rtr_prior;
+        if let Some(h) = &self.problem.history {
+            h.lock()
+                .expect("history lock")
+                .push(if ne.finite { 0.5 * rtr } else { f64::NAN });
+        }
+        if !ne.finite {
+            self.cache = None;
+            return;
+        }
+        let n = ne.jtr.len();
+        let scale = (0..n).map(|i| ne.jtj[(i, i)]).fold(0.0, f64::max).max(1e-300);
+        let mut ridge = 0.0;
+        let chol = loop {
+            let mut a = ne.jtj.clone();
+            for i in 0..n {
+                a[(i, i)] += ridge;
+            }
+            if let Some(c) = a.cholesky() {
+                break Some(c);
+            }
+            ridge = if ridge == 0.0 { 1e-14 * scale } else { ridge * 100.0 };
+            if ridge > 1e-4 * scale {
+                break None;
+            }
+        };
+        let Some(chol) = chol else {
+            self.cache = None;
+            return;
+        };
+        let l = chol.l();
+        let r1 = l
+            .solve_lower_triangular(&ne.jtr)
+            .unwrap_or_else(|| DVector::zeros(n));
+        let rest = (rtr - r1.norm_squared()).max(0.0).sqrt();
+        let mut res = DVector::zeros(n + 1);
+        res.rows_mut(0, n).copy_from(&r1);
+        res[n] = rest;
+        let mut jac = DMatrix::zeros(n + 1, n);
+        jac.rows_mut(0, n).copy_from(&l.transpose());
+        self.cache = Some((res, jac));
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Reduced<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.problem.set_params(x);
+        self.refresh();
+    }
+
+    fn params(&self) -> DVector<f64> {
+        LeastSquaresProblem::params(&self.problem)
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        self.cache.as_ref().map(|c| c.0.clone())
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.cache.as_ref().map(|c| c.1.clone())
     }
 }
 
@@ -233,9 +393,10 @@ pub fn fit(
         priors: priors.to_vec(),
         history: Some(std::sync::Mutex::new(vec![])),
     };
-    let (problem, report) = LevenbergMarquardt::new()
+    let (reduced, report) = LevenbergMarquardt::new()
         .with_patience(200)
-        .minimize(problem);
+        .minimize(Reduced::new(problem));
+    let problem = reduced.problem;
     let p = from_unbounded(&problem.u).0;
     let (std, correlation, cost) = problem.covariance();
     let m_obs = 3 * obs.len();

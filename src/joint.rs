@@ -1,0 +1,618 @@
+//! The joint fit: σ0, albedo (per channel), the light direction, the specular lobe (ks, α) and,
+//! when the light's irradiance is known, η — from every sphere at once.
+//!
+//! Stages, each a Levenberg–Marquardt fit ([`crate::solver`]) from the previous one's result:
+//! 1. start values from the data: the light from the detector (or, without a highlight, the
+//!    radiance-weighted mean normal); σ0 per channel by a search over a log grid with the albedo
+//!    solved in closed form at each grid point; α from the detector's lobe fit; ks by linear least
+//!    squares on the highlight pixels;
+//! 2. the diffuse fit (σ0, albedo, light) on 2° cells without the highlight pixels;
+//! 3. the choice of reduction level ([`crate::reduce`]): the coarsest whose predicted parameter
+//!    shift stays below [`SHIFT_LIMIT`] standard errors;
+//! 4. the full fit with the Huber loss on the chosen cells and the highlight pixels;
+//! 5. identifiability: parameters whose standard error is not finite or larger than their
+//!    plausible range are held at their prior (η, α), or switched off (ks, the extensions), and
+//!    the fit is repeated.
+
+use crate::cdrf;
+use crate::fresnel;
+use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
+use crate::observe::SphereData;
+use crate::reduce::{Pooled, FACTORS};
+use crate::solver::{self, Fit, Obs, Prior};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Largest predicted shift of any parameter that a reduction level may cause (in standard errors).
+pub const SHIFT_LIMIT: f64 = 0.3;
+/// Huber threshold (in robust σ of the residuals).
+pub const HUBER_K: f64 = 1.345;
+/// Default prior on η (a typical wax, soap or resin).
+pub const ETA_PRIOR: (f64, f64) = (1.45, 0.05);
+/// Roughness held when the data cannot determine it.
+pub const ALPHA_PRIOR: f64 = 0.1;
+
+/// How many residuals the solver sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reduction {
+    /// The coarsest level whose predicted shift stays below [`SHIFT_LIMIT`].
+    Auto,
+    /// Every pixel.
+    None,
+    /// Cells of this many × 0.25°.
+    Factor(u32),
+}
+
+/// Which model extensions are on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Extensions {
+    pub sigma_exponent: bool,
+    pub albedo_curvature: bool,
+}
+
+impl Extensions {
+    pub fn any(&self) -> bool {
+        self.sigma_exponent || self.albedo_curvature
+    }
+
+    pub fn name(&self) -> String {
+        match (self.sigma_exponent, self.albedo_curvature) {
+            (false, false) => "plain".into(),
+            (true, false) => "sigma-exponent".into(),
+            (false, true) => "albedo-curvature".into(),
+            (true, true) => "sigma-exponent+albedo-curvature".into(),
+        }
+    }
+}
+
+/// Everything the joint fit is told.
+#[derive(Clone, Debug)]
+pub struct Setup {
+    pub model: Model,
+    /// The detector's light (pooling is done around it), or `None`.
+    pub light: Option<Vector3<f64>>,
+    /// Angular radius of the highlight (pixels within it are kept unpooled).
+    pub highlight_radius: Option<f64>,
+    /// The detector's roughness, when it fitted a lobe.
+    pub alpha: Option<f64>,
+    pub eta_prior: (f64, f64),
+    /// The light's irradiance in the photos' radiance units: the specular scale is then known
+    /// (ks = E) and η is fitted.
+    pub irradiance: Option<f64>,
+    pub reduction: Reduction,
+    pub robust: bool,
+    pub extensions: Extensions,
+    /// Start values given by the user (instead of those from the data).
+    pub start_sigma0: Option<[f64; 3]>,
+    pub start_light: Option<LightAngles>,
+}
+
+/// One stage's convergence record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage {
+    pub name: String,
+    pub observations: usize,
+    pub free: Vec<String>,
+    pub evaluations: usize,
+    pub termination: String,
+    pub converged: bool,
+    pub cost_start: f64,
+    pub cost_end: f64,
+    /// ½Σr² at every residual evaluation (trial steps included).
+    pub cost_history: Vec<f64>,
+    pub seconds: f64,
+}
+
+impl Stage {
+    fn of(name: &str, obs: usize, f: &Fit, t: std::time::Instant) -> Stage {
+        Stage {
+            name: name.into(),
+            observations: obs,
+            free: (0..N_PARAMS)
+                .filter(|&k| f.free[k])
+                .map(|k| PARAM_NAMES[k].to_string())
+                .collect(),
+            evaluations: f.evaluations,
+            termination: f.termination.clone(),
+            converged: f.converged,
+            cost_start: f.history.first().copied().unwrap_or(f.cost),
+            cost_end: f.cost,
+            cost_history: f.history.clone(),
+            seconds: t.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+/// A reduction level as considered.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Level {
+    /// Cell width (degrees; 0 = every pixel).
+    pub width_deg: f64,
+    pub observations: usize,
+    /// Predicted largest parameter shift, in standard errors.
+    pub predicted_shift_std: f64,
+}
+
+/// What [`fit_joint`] returns.
+#[derive(Clone, Debug)]
+pub struct JointFit {
+    pub fit: Fit,
+    pub model: Model,
+    pub stages: Vec<Stage>,
+    pub levels: Vec<Level>,
+    /// The level used (width 0: every pixel).
+    pub chosen: Level,
+    pub pixels: usize,
+    pub downweighted: usize,
+    /// Why parameters were held or switched off, and other decisions.
+    pub notes: Vec<String>,
+    /// How each parameter was treated: "fitted", "fixed", "prior …", "off: …".
+    pub status: [String; N_PARAMS],
+    /// Whether a specular lobe was fitted.
+    pub specular: bool,
+}
+
+/// The light from the shading alone: the radiance-weighted mean normal (a start value).
+pub fn light_from_shading(spheres: &[&SphereData]) -> Vector3<f64> {
+    let mut s = Vector3::zeros();
+    for sp in spheres {
+        for o in &sp.obs {
+            let l = o.radiance[0] + o.radiance[1] + o.radiance[2];
+            s += o.geometry.normal * l;
+        }
+    }
+    if s.norm() > 0.0 {
+        s.normalize()
+    } else {
+        Vector3::new(0.0, 0.0, -1.0)
+    }
+}
+
+/// σ0 per channel by a search over a log grid, the albedo in closed form at each point (least
+/// squares of a · T(φ) · f(θ; σ) against the data, weighted), without the specular term.
+pub fn diffuse_start(
+    model: &Model,
+    obs: &[Obs],
+    light: &LightAngles,
+    eta: f64,
+    sigma0: Option<[f64; 3]>,
+) -> ([f64; 3], [f64; 3]) {
+    let l = light.direction();
+    let radii: Vec<f64> = obs.iter().map(|o| o.geometry.radius_mm).collect();
+    let r_mid = {
+        let mut r = radii.clone();
+        r.sort_by(|a, b| a.total_cmp(b));
+        r.get(r.len() / 2).copied().unwrap_or(20.0)
+    };
+    // σ = σ0/r from 0.005 to 2 rad at the middle radius.
+    let grid: Vec<f64> = (0..40)
+        .map(|i| r_mid * 0.005 * (400.0f64).powf(i as f64 / 39.0))
+        .collect();
+    let geo: Vec<(f64, f64, f64)> = obs
+        .iter()
+        .map(|o| {
+            let g = &o.geometry;
+            let t = if model.exit_fresnel {
+                fresnel::transmission(g.normal.dot(&g.view), eta)
+            } else {
+                1.0
+            };
+            (g.normal.dot(&l).clamp(-1.0, 1.0).acos(), t, g.radius_mm)
+        })
+        .collect();
+    let mut s0 = [0.0; 3];
+    let mut a0 = [0.0; 3];
+    for c in 0..3 {
+        let eval = |sig0: f64| -> (f64, f64) {
+            let (mut sff, mut sfl, mut sll) = (0.0, 0.0, 0.0);
+            for (o, &(th, t, r)) in obs.iter().zip(&geo) {
+                let f = t * cdrf::value(th, sig0 / r, model.convolution);
+                let w2 = o.weight[c] * o.weight[c];
+                sff += w2 * f * f;
+                sfl += w2 * f * o.radiance[c];
+                sll += w2 * o.radiance[c] * o.radiance[c];
+            }
+            let a = if sff > 0.0 { (sfl / sff).max(1e-6) } else { 1e-3 };
+            (a, sll - 2.0 * a * sfl + a * a * sff)
+        };
+        match sigma0 {
+            Some(s) => {
+                s0[c] = s[c];
+                a0[c] = eval(s[c]).0;
+            }
+            None => {
+                let best = grid
+                    .iter()
+                    .map(|&g| (g, eval(g)))
+                    .min_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
+                    .expect("grid is not empty");
+                s0[c] = best.0;
+                a0[c] = best.1 .0;
+            }
+        }
+    }
+    (s0, a0)
+}
+
+/// Fit the joint model to the given spheres.
+pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
+    let model = setup.model;
+    let mut notes = vec![];
+    let mut status: [String; N_PARAMS] = std::array::from_fn(|_| "fitted".to_string());
+    let distinct_radii = {
+        let mut r: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+        r.sort_by(|a, b| a.total_cmp(b));
+        r.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        r.len()
+    };
+    let highlight = setup.light.is_some() && setup.highlight_radius.is_some();
+    // Start light.
+    let light0 = setup
+        .light
+        .unwrap_or_else(|| light_from_shading(spheres));
+    let keep = if highlight {
+        setup.highlight_radius.unwrap_or(0.0)
+    } else {
+        0.0
+    };
+    let pool = |light: Vector3<f64>| {
+        let mut p = Pooled::new(light, keep);
+        for (k, s) in spheres.iter().enumerate() {
+            p.add_sphere(k, &s.obs);
+        }
+        p
+    };
+    let mut pooled = pool(light0);
+    let start_light = setup
+        .start_light
+        .unwrap_or_else(|| LightAngles::from_direction(&light0));
+    let (eta_mean, eta_std) = setup.eta_prior;
+    let coarse = pooled.observations(&pooled.merged(16));
+    let coarse = &coarse[..coarse.len() - pooled.kept.len()];
+    let (s0, a0) = diffuse_start(&model, coarse, &start_light, eta_mean, setup.start_sigma0);
+    let mut p = Params {
+        material: crate::model::Material {
+            sigma0_mm: s0,
+            albedo: a0,
+            eta: eta_mean,
+            specular: crate::model::SpecularParams {
+                ks: 0.0,
+                alpha: setup.alpha.unwrap_or(ALPHA_PRIOR),
+            },
+            sigma_exponent: 0.0,
+            albedo_curvature: 0.0,
+        },
+        light: start_light,
+    };
+    let mut stages = vec![];
+    // Stage: diffuse, on 2° cells without the highlight.
+    let mut free = [false; N_PARAMS];
+    for k in 0..6 {
+        free[k] = true;
+    }
+    free[idx::AZIMUTH] = true;
+    free[idx::ELEVATION] = true;
+    let mut downweighted = 0;
+    for round in 0..2 {
+        let t = std::time::Instant::now();
+        let cells = pooled.merged(8);
+        let obs: Vec<Obs> = pooled.observations(&cells)[..cells.len()].to_vec();
+        let (f, _, _) = solver::fit_robust(model, &obs, &p, free, &[], HUBER_K, 4);
+        stages.push(Stage::of(
+            "diffuse (2° cells, highlight left out)",
+            obs.len(),
+            &f,
+            t,
+        ));
+        let moved = f.params.light.direction().angle(&pooled.light);
+        p = f.params;
+        // Cells follow the light: pool again around a light that moved by more than 2°.
+        if moved > 2f64.to_radians() && round == 0 {
+            notes.push(format!(
+                "the light moved {:.1}° from its start in the diffuse fit: pixels pooled again around it",
+                moved.to_degrees()
+            ));
+            pooled = pool(p.light.direction());
+        } else {
+            break;
+        }
+    }
+    // Specular start.
+    let mut specular = highlight && !pooled.kept.is_empty();
+    if specular {
+        let mut unit = p;
+        unit.material.albedo = [0.0; 3];
+        unit.material.specular.ks = 1.0;
+        let (mut num, mut den) = (0.0, 0.0);
+        for o in &pooled.kept {
+            let d = model.radiance(&p, &o.geometry);
+            let s = model.radiance(&unit, &o.geometry);
+            for c in 0..3 {
+                let w2 = o.weight[c] * o.weight[c];
+                num += w2 * s[c] * (o.radiance[c] - d[c]);
+                den += w2 * s[c] * s[c];
+            }
+        }
+        p.material.specular.ks = match setup.irradiance {
+            Some(e) => e,
+            None if den > 0.0 && num > 0.0 => num / den,
+            None => 1e-3,
+        };
+    } else {
+        status[idx::KS] = if setup.light.is_none() {
+            "off: no usable highlight".into()
+        } else {
+            "off: no highlight pixels".into()
+        };
+        status[idx::ALPHA] = status[idx::KS].clone();
+        notes.push("no usable highlight: specular lobe off (ks = 0)".into());
+    }
+    // The final parameter set.
+    let mut priors: Vec<Prior> = vec![];
+    free[idx::KS] = specular && setup.irradiance.is_none();
+    free[idx::ALPHA] = specular;
+    free[idx::ETA] = true;
+    match setup.irradiance {
+        Some(e) => {
+            if specular {
+                status[idx::KS] = format!("fixed: the given irradiance {e}");
+            }
+        }
+        None => {
+            // Without the light's irradiance a free ks absorbs F(η) (notes §4): η rests on its
+            // prior, and on the exit transmission T(φ) as far as the data determine it.
+            status[idx::ETA] = format!("prior {eta_mean} ± {eta_std}");
+            priors.push(Prior {
+                index: idx::ETA,
+                mean: eta_mean,
+                std: eta_std,
+            });
+        }
+    }
+    let mut ext = setup.extensions;
+    if ext.any() && distinct_radii < 3 {
+        notes.push(format!(
+            "extensions {} need at least 3 different radii ({} given): off",
+            ext.name(),
+            distinct_radii
+        ));
+        ext = Extensions::default();
+    }
+    free[idx::SIGMA_EXPONENT] = ext.sigma_exponent;
+    free[idx::ALBEDO_CURVATURE] = ext.albedo_curvature;
+    for (k, on) in [
+        (idx::SIGMA_EXPONENT, ext.sigma_exponent),
+        (idx::ALBEDO_CURVATURE, ext.albedo_curvature),
+    ] {
+        if !on {
+            status[k] = "off".into();
+        }
+    }
+    // Reduction level.
+    let mut levels = vec![];
+    let raw: Vec<Obs> = spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect();
+    let chosen_factor = match setup.reduction {
+        Reduction::None => None,
+        Reduction::Factor(f) => Some(f),
+        Reduction::Auto => {
+            let mut pick = None;
+            for &f in FACTORS.iter().rev() {
+                let cells = pooled.merged(f);
+                let shift = pooled.shift(&cells, &model, &p, free);
+                levels.push(Level {
+                    width_deg: f as f64 * 0.25,
+                    observations: cells.len() + pooled.kept.len(),
+                    predicted_shift_std: shift,
+                });
+                if shift <= SHIFT_LIMIT {
+                    pick = Some(f);
+                    break;
+                }
+            }
+            pick
+        }
+    };
+    let final_obs = match chosen_factor {
+        Some(f) => pooled.observations(&pooled.merged(f)),
+        None => raw,
+    };
+    let chosen = Level {
+        width_deg: chosen_factor.map_or(0.0, |f| f as f64 * 0.25),
+        observations: final_obs.len(),
+        predicted_shift_std: levels
+            .iter()
+            .find(|l| Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25))
+            .map_or(0.0, |l| l.predicted_shift_std),
+    };
+    if chosen_factor.is_none() && setup.reduction == Reduction::Auto {
+        notes.push(format!(
+            "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std: every pixel used"
+        ));
+    }
+    // Full fit, then identifiability.
+    let mut fit = None;
+    for attempt in 0..3 {
+        let t = std::time::Instant::now();
+        let (f, _, down) = if setup.robust {
+            solver::fit_robust(model, &final_obs, &p, free, &priors, HUBER_K, 6)
+        } else {
+            let f = solver::fit(model, &final_obs, &p, free, &priors);
+            (f, vec![], 0)
+        };
+        downweighted = down;
+        stages.push(Stage::of(
+            if attempt == 0 {
+                "joint"
+            } else {
+                "joint (poorly determined parameters held)"
+            },
+            final_obs.len(),
+            &f,
+            t,
+        ));
+        let poorly = poorly_determined(&f);
+        let mut changed = false;
+        for k in poorly {
+            match k {
+                idx::ETA => {
+                    if priors.iter().any(|q| q.index == idx::ETA) {
+                        continue;
+                    }
+                    p.material.eta = eta_mean;
+                    priors.push(Prior {
+                        index: idx::ETA,
+                        mean: eta_mean,
+                        std: eta_std,
+                    });
+                    status[k] = format!("prior {eta_mean} ± {eta_std} (free fit: ± {:.3})", f.std[k]);
+                    notes.push(format!(
+                        "η is not determined by these data (std {:.3}): held at its prior {eta_mean} ± {eta_std}",
+                        f.std[k]
+                    ));
+                }
+                idx::ALPHA => {
+                    free[k] = false;
+                    p.material.specular.alpha = setup.alpha.unwrap_or(ALPHA_PRIOR);
+                    status[k] = format!("held at {} (free fit: ± {:.3})", p.material.specular.alpha, f.std[k]);
+                    notes.push(format!("α is not determined (std {:.3}): held", f.std[k]));
+                }
+                idx::KS => {
+                    free[idx::KS] = false;
+                    free[idx::ALPHA] = false;
+                    p.material.specular.ks = 0.0;
+                    specular = false;
+                    status[idx::KS] = format!("off: not determined (free fit: ± {:.3})", f.std[k]);
+                    status[idx::ALPHA] = "off".into();
+                    notes.push("the specular scale is not determined: lobe off".into());
+                }
+                idx::SIGMA_EXPONENT | idx::ALBEDO_CURVATURE => {
+                    free[k] = false;
+                    status[k] = format!("off: not determined (free fit: ± {:.3})", f.std[k]);
+                    notes.push(format!("{} is not determined: off", PARAM_NAMES[k]));
+                }
+                _ => {
+                    notes.push(format!(
+                        "{} is poorly determined (std {:.3} for {:.4})",
+                        PARAM_NAMES[k],
+                        f.std[k],
+                        f.params.to_vec()[k]
+                    ));
+                    continue;
+                }
+            }
+            if k == idx::SIGMA_EXPONENT {
+                p.material.sigma_exponent = 0.0;
+            }
+            if k == idx::ALBEDO_CURVATURE {
+                p.material.albedo_curvature = 0.0;
+            }
+            changed = true;
+        }
+        if !changed || attempt == 2 {
+            fit = Some(f);
+            break;
+        }
+        // Keep what was fitted for the rest as the next start.
+        let held = p;
+        p = f.params;
+        for k in 0..N_PARAMS {
+            if !free[k] {
+                let mut v = p.to_vec();
+                v[k] = held.to_vec()[k];
+                p = Params::from_vec(&v);
+            }
+        }
+    }
+    let fit = fit.expect("the loop ends with a fit");
+    if status[idx::ETA].starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
+        notes.push(format!(
+            "η = {:.4} ± {:.4}: the data, through the exit transmission T(φ), determine η better than its prior (± {eta_std}); that rests on the model's silhouette fall-off",
+            fit.params.material.eta, fit.std[idx::ETA]
+        ));
+    }
+    for k in 0..N_PARAMS {
+        if !free[k] && status[k] == "fitted" {
+            status[k] = "fixed".into();
+        }
+    }
+    JointFit {
+        fit,
+        model,
+        stages,
+        levels,
+        chosen,
+        pixels: pooled.pixels,
+        downweighted,
+        notes,
+        status,
+        specular,
+    }
+}
+
+/// Free parameters the data leave undetermined: a standard error that is not finite, or larger
+/// than the parameter's plausible range (relative 50% for positive ones, 0.5 for η − 1, 1 for the
+/// extensions, 10° for the light angles).
+pub fn poorly_determined(f: &Fit) -> Vec<usize> {
+    let p = f.params.to_vec();
+    (0..N_PARAMS)
+        .filter(|&k| f.free[k])
+        .filter(|&k| {
+            let s = f.std[k];
+            !s.is_finite()
+                || match k {
+                    idx::ETA => s > 0.5,
+                    idx::AZIMUTH | idx::ELEVATION => s > 10f64.to_radians(),
+                    idx::SIGMA_EXPONENT | idx::ALBEDO_CURVATURE => s > 1.0,
+                    _ => s > 0.5 * p[k].abs(),
+                }
+        })
+        .collect()
+}
+
+/// Relative RMSE of the model against a sphere's pixels (every `stride`-th), over all of them,
+/// the lit ones (θ < 90° from the given light) and the unlit ones.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Prediction {
+    pub pixels: usize,
+    pub rmse: f64,
+    pub rel_rmse: f64,
+    pub lit_rel_rmse: f64,
+    pub unlit_rel_rmse: f64,
+}
+
+pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> Prediction {
+    use rayon::prelude::*;
+    let stride = (s.obs.len() / max_pixels.max(1)).max(1);
+    let l = p.light.direction();
+    let sums = s
+        .obs
+        .par_iter()
+        .step_by(stride)
+        .map(|o| {
+            let m = model.radiance(p, &o.geometry);
+            let lit = o.geometry.normal.dot(&l) > 0.0;
+            let mut a = [0.0; 6];
+            for c in 0..3 {
+                let (d2, o2) = ((m[c] - o.radiance[c]).powi(2), o.radiance[c].powi(2));
+                let k = if lit { 0 } else { 2 };
+                a[k] += d2;
+                a[k + 1] += o2;
+                a[4] += d2;
+                a[5] += o2;
+            }
+            (a, 1usize)
+        })
+        .reduce(
+            || ([0.0; 6], 0),
+            |(a, n), (b, m)| (std::array::from_fn(|i| a[i] + b[i]), n + m),
+        );
+    let (a, n) = sums;
+    let rel = |d: f64, o: f64| if o > 0.0 { (d / o).sqrt() } else { f64::NAN };
+    Prediction {
+        pixels: n,
+        rmse: (a[4] / (3 * n.max(1)) as f64).sqrt(),
+        rel_rmse: rel(a[4], a[5]),
+        lit_rel_rmse: rel(a[0], a[1]),
+        unlit_rel_rmse: rel(a[2], a[3]),
+    }
+}

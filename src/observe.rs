@@ -1,0 +1,239 @@
+//! From a session and its detections to the solver's observations: decode every photo, take the
+//! pixels of every detected sphere ([`crate::samples`]), leave out the saturated ones and those
+//! that straddle the silhouette, and weight each channel by 1/σ of the sphere's pixel noise.
+//!
+//! The noise is measured, not assumed: half the spread (1.4826 × MAD / √2) of the differences of
+//! horizontally adjacent unflagged pixels of the sphere, per channel. The shading changes little
+//! from one pixel to the next, so these differences are noise; the median ignores the few that
+//! cross the highlight.
+//!
+//! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
+//! pixels away from the spheres ([`background`]) and subtracted from every sample.
+
+use crate::detect::Detections;
+use crate::error::{Error, Result};
+use crate::model::Geometry;
+use crate::outline::Projection;
+use crate::photo::load_linear_rgb;
+use crate::samples::{self, Sample};
+use crate::session::{SessionReport, Session};
+use crate::solver::Obs;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The usable pixels of one sphere.
+#[derive(Clone, Debug)]
+pub struct SphereData {
+    /// Photo file (as in session.json) and the sphere's place in it.
+    pub image: String,
+    pub index: usize,
+    pub radius_mm: f64,
+    pub obs: Vec<Obs>,
+    /// Per observation: inside the highlight (flag of [`crate::samples`]).
+    pub highlight: Vec<bool>,
+    /// Per observation: angle between normal and the detected light (radians).
+    pub theta: Vec<f64>,
+    /// Pixels on the sphere, and how many were left out as saturated or on the edge.
+    pub pixels: usize,
+    pub saturated: usize,
+    pub edge: usize,
+    /// Noise σ per channel (radiance units).
+    pub noise: [f64; 3],
+    /// The photo's dark floor subtracted from the radiance (`None`: not measurable).
+    pub floor: Option<[f64; 3]>,
+}
+
+/// Observations of a session, with the time spent decoding and sampling.
+#[derive(Clone, Debug)]
+pub struct Observed {
+    pub spheres: Vec<SphereData>,
+    pub decode_s: f64,
+    pub samples_s: f64,
+    /// The floor subtracted from each photo (radiance units, per channel; `None`: not measurable,
+    /// nothing subtracted).
+    pub floors: Vec<Option<[f64; 3]>>,
+}
+
+/// The dark-room floor per channel: the median of the pixels outside every sphere (their pixel
+/// boxes grown by a quarter), sampled on a grid of at most ~200 000 points; `None` when fewer
+/// than 1000 such pixels remain (spheres filling the frame).
+pub fn background(img: &crate::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[f64; 3]> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let step = ((w * h / 200_000) as f64).sqrt().max(1.0) as usize;
+    let grown: Vec<[f64; 4]> = boxes
+        .iter()
+        .map(|b| {
+            let (bw, bh) = ((b[2] - b[0]) as f64, (b[3] - b[1]) as f64);
+            [
+                b[0] as f64 - 0.25 * bw,
+                b[1] as f64 - 0.25 * bh,
+                b[2] as f64 + 0.25 * bw,
+                b[3] as f64 + 0.25 * bh,
+            ]
+        })
+        .collect();
+    let mut ch: [Vec<f32>; 3] = Default::default();
+    for y in (0..h).step_by(step) {
+        for x in (0..w).step_by(step) {
+            let (xf, yf) = (x as f64, y as f64);
+            if grown
+                .iter()
+                .any(|b| xf >= b[0] && xf <= b[2] && yf >= b[1] && yf <= b[3])
+            {
+                continue;
+            }
+            let i = 3 * (y * w + x);
+            for c in 0..3 {
+                ch[c].push(img.data[i + c]);
+            }
+        }
+    }
+    if ch[0].len() < 1000 {
+        return None;
+    }
+    Some(ch.map(|mut v| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2] as f64
+    }))
+}
+
+/// Noise per channel from adjacent-pixel differences (see the module docs).
+pub fn pixel_noise(s: &[Sample]) -> [f64; 3] {
+    let skip = samples::SATURATED | samples::EDGE | samples::HIGHLIGHT;
+    let mut diffs: [Vec<f64>; 3] = Default::default();
+    for w in s.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if b.px[1] == a.px[1] && b.px[0] == a.px[0] + 1 && (a.flags | b.flags) & skip == 0 {
+            for c in 0..3 {
+                diffs[c].push((a.radiance[c] - b.radiance[c]).abs());
+            }
+        }
+    }
+    diffs.map(|mut d| {
+        if d.is_empty() {
+            return f64::NAN;
+        }
+        d.sort_by(|a, b| a.total_cmp(b));
+        1.4826 * d[d.len() / 2] / std::f64::consts::SQRT_2
+    })
+}
+
+/// Decode the session's photos and collect the observations of every sphere of `det`, with
+/// θ and the highlight flag from `light` (and the highlight radius `highlight_radius`).
+pub fn observe(
+    report: &SessionReport,
+    sess: &Session,
+    det: &Detections,
+    proj: &Projection,
+    light: Option<&Vector3<f64>>,
+    highlight_radius: Option<f64>,
+) -> Result<Observed> {
+    let t0 = Instant::now();
+    let images: Vec<_> = report
+        .images
+        .par_iter()
+        .zip(&sess.images)
+        .map(|(info, si)| load_linear_rgb(&info.path, si.linear))
+        .collect::<Result<_>>()?;
+    let decode_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let floors: Vec<Option<[f64; 3]>> = images
+        .par_iter()
+        .zip(&det.images)
+        .zip(&report.images)
+        .map(|((img, d), info)| {
+            let boxes: Vec<[u32; 4]> = d
+                .spheres
+                .iter()
+                .filter_map(|s| s.outline.outline().pixel_box(proj, 2.0, img.width, img.height))
+                .collect();
+            background(img, &boxes).map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
+        })
+        .collect();
+    let mut jobs = vec![];
+    for (i, (info, d)) in report.images.iter().zip(&det.images).enumerate() {
+        if d.spheres.len() != info.radii_mm.len() {
+            return Err(Error::invalid(
+                &report.session_file,
+                format!(
+                    "{}: detections list {} spheres, session.json {}",
+                    info.file,
+                    d.spheres.len(),
+                    info.radii_mm.len()
+                ),
+            ));
+        }
+        for (j, s) in d.spheres.iter().enumerate() {
+            jobs.push((i, j, s));
+        }
+    }
+    let spheres: Vec<SphereData> = jobs
+        .par_iter()
+        .map(|&(i, j, s)| {
+            let info = &report.images[i];
+            let smp = samples::sphere_samples(
+                &images[i],
+                info.exposure.unwrap_or(1.0),
+                proj,
+                &s.outline.outline(),
+                s.radius_mm,
+                light,
+                highlight_radius,
+            );
+            let floor_rgb = floors[i].unwrap_or([0.0; 3]);
+            let mut smp = smp;
+            for x in smp.iter_mut() {
+                for c in 0..3 {
+                    x.radiance[c] -= floor_rgb[c];
+                }
+            }
+            let noise = pixel_noise(&smp);
+            // A sphere without measurable noise (a noise-free render): one level unit.
+            let floor = 0.5 / ((1u32 << images[i].bits.min(16)) as f64)
+                / info.exposure.unwrap_or(1.0);
+            let noise = noise.map(|n| if n.is_finite() && n > floor { n } else { floor });
+            let mut out = SphereData {
+                image: info.file.clone(),
+                index: j,
+                radius_mm: s.radius_mm,
+                obs: vec![],
+                highlight: vec![],
+                theta: vec![],
+                pixels: smp.len(),
+                saturated: 0,
+                edge: 0,
+                noise,
+                floor: floors[i],
+            };
+            for x in &smp {
+                if x.flags & samples::SATURATED != 0 {
+                    out.saturated += 1;
+                    continue;
+                }
+                if x.flags & samples::EDGE != 0 {
+                    out.edge += 1;
+                    continue;
+                }
+                out.obs.push(Obs {
+                    geometry: Geometry {
+                        normal: x.normal,
+                        view: x.view,
+                        radius_mm: s.radius_mm,
+                    },
+                    radiance: x.radiance,
+                    weight: noise.map(|n| 1.0 / n),
+                });
+                out.highlight.push(x.flags & samples::HIGHLIGHT != 0);
+                out.theta.push(x.theta);
+            }
+            out
+        })
+        .collect();
+    Ok(Observed {
+        spheres,
+        decode_s,
+        samples_s: t1.elapsed().as_secs_f64(),
+        floors,
+    })
+}

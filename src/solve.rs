@@ -1,0 +1,988 @@
+//! `workbench solve <session>/`: from photos to a measured material, written as `fit.json`
+//! (schema `workbench.fit/1`).
+//!
+//! Runs what is needed: the session is checked ([`crate::session::inspect`]), `detections.json` is
+//! reused when it is newer than every input (session.json, the photos, the intrinsics) and
+//! describes the same photos, else detection runs ([`crate::detect`]); the photos are decoded and
+//! sampled ([`crate::observe`]); then the joint fit ([`crate::joint`]) or the paper's baseline
+//! ([`crate::paper`]). Optional: model extensions chosen by held-out error, a held-out sphere's
+//! prediction error, and figures.
+
+use crate::detect::{self, Detections};
+use crate::error::{Error, Result};
+use crate::joint::{self, Extensions, JointFit, Level, Prediction, Reduction, Setup, Stage};
+use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
+use crate::observe::{self, SphereData};
+use crate::outline::Projection;
+use crate::paper::{self, RadiusFit};
+use crate::session::{self, LightMode, Session, SessionReport};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::{Instant, SystemTime};
+
+pub const SCHEMA: &str = "workbench.fit/1";
+/// Pixels per sphere used for RMSE and predictions (every k-th beyond this).
+pub const PREDICT_PIXELS: usize = 200_000;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    #[default]
+    Joint,
+    Paper,
+}
+
+/// Model extensions: none, the ones named, or chosen by held-out error.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ExtensionChoice {
+    #[default]
+    None,
+    On(Extensions),
+    Auto,
+}
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub session: PathBuf,
+    /// Where fit.json goes (default: beside session.json).
+    pub out: Option<PathBuf>,
+    pub method: Method,
+    pub holdout: Option<f64>,
+    /// Prior on η (mean, std); `eta_prior_given` says whether the user chose it.
+    pub eta_prior: (f64, f64),
+    pub irradiance: Option<f64>,
+    pub reduction: Reduction,
+    pub robust: bool,
+    pub extensions: ExtensionChoice,
+    pub start_sigma0: Option<[f64; 3]>,
+    pub start_light: Option<LightAngles>,
+    /// Run detection even when detections.json is up to date.
+    pub redetect: bool,
+    pub plots: Option<PathBuf>,
+    pub quiet: bool,
+}
+
+impl Options {
+    pub fn new(session: impl Into<PathBuf>) -> Options {
+        Options {
+            session: session.into(),
+            out: None,
+            method: Method::Joint,
+            holdout: None,
+            eta_prior: joint::ETA_PRIOR,
+            irradiance: None,
+            reduction: Reduction::Auto,
+            robust: true,
+            extensions: ExtensionChoice::None,
+            start_sigma0: None,
+            start_light: None,
+            redetect: false,
+            plots: None,
+            quiet: true,
+        }
+    }
+}
+
+/// A specular lobe as written.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpecularJson {
+    pub ks: f64,
+    pub alpha: f64,
+}
+
+/// Standard errors, mirroring the values.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StdJson {
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub eta: f64,
+    pub specular: Option<SpecularJson>,
+    /// Angular standard error of the light direction (degrees; from the two angles').
+    pub light_deg: f64,
+    pub sigma_exponent: Option<f64>,
+    pub albedo_curvature: Option<f64>,
+}
+
+/// One parameter, flat.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParamJson {
+    pub name: String,
+    pub value: f64,
+    pub std: f64,
+    /// "fitted", "fixed", "prior …", "off: …".
+    pub status: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CorrelationJson {
+    pub names: Vec<String>,
+    pub matrix: Vec<Vec<f64>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SphereRmse {
+    pub image: String,
+    pub index: usize,
+    pub radius_mm: f64,
+    /// Pixels used by the fit (saturated and edge pixels left out) and how many were left out.
+    pub pixels: usize,
+    pub saturated: usize,
+    pub edge: usize,
+    /// Pixel noise σ per channel (radiance units), as measured.
+    pub noise: [f64; 3],
+    /// The photo's dark floor, subtracted before fitting (null: not measurable).
+    pub floor: Option<[f64; 3]>,
+    pub rmse: f64,
+    pub rel_rmse: f64,
+    pub lit_rel_rmse: f64,
+    pub unlit_rel_rmse: f64,
+    /// Held out of the fit.
+    pub held_out: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RmseJson {
+    /// Over all spheres' pixels (radiance units), and relative to their RMS.
+    pub overall: f64,
+    pub relative: f64,
+    pub spheres: Vec<SphereRmse>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HoldoutJson {
+    pub radius_mm: f64,
+    pub pixels: usize,
+    pub rel_rmse: f64,
+    pub lit_rel_rmse: f64,
+    pub unlit_rel_rmse: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReductionJson {
+    pub setting: String,
+    pub pixels: usize,
+    /// The level used (width 0: every pixel).
+    pub chosen: Level,
+    /// Levels tried, coarsest first (with `auto`).
+    pub levels: Vec<Level>,
+    pub shift_limit_std: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConvergenceJson {
+    pub converged: bool,
+    pub stages: Vec<Stage>,
+    /// Channel residuals down-weighted by the Huber loss in the last round.
+    pub downweighted: usize,
+    pub robust_loss: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub extensions: String,
+    /// Mean over radii of the held-out relative RMSE (each radius left out in turn).
+    pub heldout_rel_rmse: f64,
+    pub converged: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelChoice {
+    pub candidates: Vec<Candidate>,
+    pub chosen: String,
+    pub reason: String,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timings {
+    pub inspect_s: f64,
+    pub detect_s: f64,
+    pub decode_s: f64,
+    pub samples_s: f64,
+    pub solve_s: f64,
+    pub model_choice_s: f64,
+    pub holdout_s: f64,
+    pub total_s: f64,
+}
+
+/// `fit.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitFile {
+    pub schema: String,
+    pub method: Method,
+    pub session: String,
+    pub detections: String,
+    pub projection: String,
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub eta: f64,
+    /// Null when no lobe was fitted.
+    pub specular: Option<SpecularJson>,
+    pub light_direction: [f64; 3],
+    pub light_azimuth_deg: f64,
+    pub light_elevation_deg: f64,
+    /// The extensions' values when on (see `model`), with the reference radius.
+    pub sigma_exponent: Option<f64>,
+    pub albedo_curvature: Option<f64>,
+    pub reference_radius_mm: f64,
+    pub std: StdJson,
+    pub parameters: Vec<ParamJson>,
+    pub correlation: CorrelationJson,
+    pub rmse: RmseJson,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<HoldoutJson>,
+    /// The paper's per-radius fits (method "paper").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_radius: Option<Vec<RadiusFit>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_choice: Option<ModelChoice>,
+    pub reduction: Option<ReductionJson>,
+    pub convergence: ConvergenceJson,
+    /// What was skipped or reused, and why.
+    pub skipped: Vec<String>,
+    pub notes: Vec<String>,
+    pub timings: Timings,
+}
+
+/// Everything loaded before fitting.
+pub struct Loaded {
+    pub report: SessionReport,
+    pub detections: Detections,
+    pub detections_path: PathBuf,
+    pub proj: Projection,
+    pub spheres: Vec<SphereData>,
+    pub light: Option<Vector3<f64>>,
+    pub highlight_radius: Option<f64>,
+    pub alpha: Option<f64>,
+    pub skipped: Vec<String>,
+    pub timings: Timings,
+}
+
+fn mtime(p: &Path) -> Option<SystemTime> {
+    std::fs::metadata(p).and_then(|m| m.modified()).ok()
+}
+
+/// Whether `detections.json` can be reused: newer than every input, same schema, same photos.
+fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detections, String> {
+    let Some(t) = mtime(path) else {
+        return Err("no detections.json yet".into());
+    };
+    let mut inputs = vec![report.session_file.clone()];
+    inputs.extend(report.images.iter().map(|i| i.path.clone()));
+    inputs.extend(report.intrinsics_file.clone());
+    for p in &inputs {
+        match mtime(p) {
+            Some(m) if m < t => {}
+            _ => {
+                return Err(format!(
+                    "{} is newer than detections.json",
+                    p.file_name().unwrap_or_default().to_string_lossy()
+                ))
+            }
+        }
+    }
+    let d: Detections = crate::output::read_json(path).map_err(|e| e.to_string())?;
+    if d.schema != detect::SCHEMA {
+        return Err(format!("detections.json has schema {:?}", d.schema));
+    }
+    let same = d.images.len() == report.images.len()
+        && d.images.iter().zip(&report.images).all(|(a, b)| {
+            a.file == b.file
+                && a.spheres.len() == b.radii_mm.len()
+                && a.spheres.iter().zip(&b.radii_mm).all(|(s, r)| s.radius_mm == *r)
+        });
+    let proj = if report.camera.is_some() {
+        "perspective"
+    } else {
+        "orthographic"
+    };
+    if !same || d.projection != proj {
+        return Err("detections.json describes other photos or another camera".into());
+    }
+    Ok(d)
+}
+
+/// Check the session, reuse or run detection, decode and sample.
+pub fn load(opts: &Options) -> Result<Loaded> {
+    let t0 = Instant::now();
+    let report = session::inspect(&opts.session)?;
+    let (sess, _) = Session::load(&report.session_file)?;
+    if sess.light == LightMode::PerImage {
+        return Err(Error::invalid(
+            &report.session_file,
+            "\"light\": \"per-image\": solve fits one light for the whole session",
+        ));
+    }
+    let mut timings = Timings {
+        inspect_s: t0.elapsed().as_secs_f64(),
+        ..Timings::default()
+    };
+    let mut skipped = vec![];
+    let proj = match &report.camera {
+        Some(c) => {
+            skipped.push(format!(
+                "calibration: camera from {} (not recalibrated)",
+                report
+                    .intrinsics_file
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            ));
+            Projection::Perspective(*c)
+        }
+        None => {
+            skipped.push("calibration: no intrinsics in session.json, orthographic camera".into());
+            Projection::Orthographic
+        }
+    };
+    let detections_path = report.session_file.with_file_name("detections.json");
+    let t1 = Instant::now();
+    let reuse = if opts.redetect {
+        Err("--redetect".to_string())
+    } else {
+        reusable(&detections_path, &report)
+    };
+    let detections = match reuse {
+        Ok(d) => {
+            skipped.push("detection: detections.json reused (newer than its inputs)".into());
+            d
+        }
+        Err(why) => {
+            let d = detect::run(&detect::Options {
+                session: report.session_file.clone(),
+                out: None,
+                overlays: true,
+                quiet: opts.quiet,
+            })?;
+            skipped.push(format!("detection: ran ({why})"));
+            d
+        }
+    };
+    timings.detect_s = t1.elapsed().as_secs_f64();
+    let light = detections.light_direction.map(Vector3::from);
+    let hl: Vec<&detect::HighlightJson> = detections
+        .images
+        .iter()
+        .flat_map(|i| i.spheres.iter())
+        .filter_map(|s| s.highlight.as_ref())
+        .filter(|h| !h.outlier)
+        .collect();
+    let highlight_radius = hl
+        .iter()
+        .map(|h| h.radius_deg.to_radians())
+        .fold(None, |a: Option<f64>, r| Some(a.map_or(r, |a| a.max(r))));
+    let mut alphas: Vec<f64> = hl.iter().filter_map(|h| h.alpha).collect();
+    alphas.sort_by(|a, b| a.total_cmp(b));
+    let alpha = alphas.get(alphas.len() / 2).copied();
+    let obs = observe::observe(
+        &report,
+        &sess,
+        &detections,
+        &proj,
+        light.as_ref(),
+        highlight_radius,
+    )?;
+    timings.decode_s = obs.decode_s;
+    timings.samples_s = obs.samples_s;
+    if obs.spheres.iter().all(|s| s.obs.is_empty()) {
+        return Err(Error::invalid(
+            &report.session_file,
+            "no usable pixels on any sphere (all saturated or on the edge)",
+        ));
+    }
+    Ok(Loaded {
+        report,
+        detections,
+        detections_path,
+        proj,
+        spheres: obs.spheres,
+        light,
+        highlight_radius,
+        alpha,
+        skipped,
+        timings,
+    })
+}
+
+fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> Setup {
+    Setup {
+        model: Model::default(),
+        light: l.light,
+        highlight_radius: l.highlight_radius,
+        alpha: l.alpha,
+        eta_prior: opts.eta_prior,
+        irradiance: opts.irradiance,
+        reduction,
+        robust: opts.robust,
+        extensions: ext,
+        start_sigma0: opts.start_sigma0,
+        start_light: opts.start_light,
+    }
+}
+
+/// Choose the extensions by held-out error: each candidate is fitted with every radius left out
+/// in turn (2° cells) and predicts that radius's pixels; the candidate with the lowest mean
+/// relative RMSE wins if it beats the plain model by more than 2% of its error.
+pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> ModelChoice {
+    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
+    radii.sort_by(|a, b| a.total_cmp(b));
+    radii.dedup();
+    let candidates = [
+        Extensions::default(),
+        Extensions {
+            sigma_exponent: true,
+            albedo_curvature: false,
+        },
+        Extensions {
+            sigma_exponent: false,
+            albedo_curvature: true,
+        },
+        Extensions {
+            sigma_exponent: true,
+            albedo_curvature: true,
+        },
+    ];
+    if radii.len() < 4 {
+        return ModelChoice {
+            candidates: vec![],
+            chosen: "plain".into(),
+            reason: format!(
+                "{} radii: leaving one out leaves fewer than the 3 an extension needs",
+                radii.len()
+            ),
+        };
+    }
+    let results: Vec<Candidate> = candidates
+        .iter()
+        .map(|&ext| {
+            let mut errs = vec![];
+            let mut ok = true;
+            for &r in &radii {
+                let train: Vec<&SphereData> = fitted
+                    .iter()
+                    .copied()
+                    .filter(|s| s.radius_mm != r)
+                    .collect();
+                let test: Vec<&SphereData> = fitted
+                    .iter()
+                    .copied()
+                    .filter(|s| s.radius_mm == r)
+                    .collect();
+                let jf = joint::fit_joint(&setup(opts, l, ext, Reduction::Factor(8)), &train);
+                ok &= jf.fit.converged;
+                let (mut d, mut o) = (0.0, 0.0);
+                for s in test {
+                    let p = joint::predict(&jf.model, &jf.fit.params, s, 20_000);
+                    d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
+                    o += p.pixels as f64;
+                }
+                errs.push((d / o.max(1.0)).sqrt());
+            }
+            Candidate {
+                extensions: ext.name(),
+                heldout_rel_rmse: errs.iter().sum::<f64>() / errs.len() as f64,
+                converged: ok,
+            }
+        })
+        .collect();
+    let plain = results[0].heldout_rel_rmse;
+    let best = results
+        .iter()
+        .filter(|c| c.converged)
+        .min_by(|a, b| a.heldout_rel_rmse.total_cmp(&b.heldout_rel_rmse))
+        .cloned()
+        .unwrap_or(results[0].clone());
+    let (chosen, reason) = if best.extensions != "plain" && best.heldout_rel_rmse < 0.98 * plain {
+        (
+            best.extensions.clone(),
+            format!(
+                "held-out error {:.4} against {:.4} for the plain model",
+                best.heldout_rel_rmse, plain
+            ),
+        )
+    } else {
+        (
+            "plain".into(),
+            format!(
+                "no extension lowers the held-out error by 2% (plain {:.4}, best {:.4} for {})",
+                plain, best.heldout_rel_rmse, best.extensions
+            ),
+        )
+    };
+    ModelChoice {
+        candidates: results,
+        chosen,
+        reason,
+    }
+}
+
+fn parse_extensions(name: &str) -> Extensions {
+    Extensions {
+        sigma_exponent: name.contains("sigma-exponent"),
+        albedo_curvature: name.contains("albedo-curvature"),
+    }
+}
+
+/// Run `solve` and write fit.json.
+pub fn run(opts: &Options) -> Result<FitFile> {
+    let t0 = Instant::now();
+    let mut l = load(opts)?;
+    let out = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| l.report.session_file.with_file_name("fit.json"));
+    if let Some(r) = opts.holdout {
+        if !l.spheres.iter().any(|s| (s.radius_mm - r).abs() < 1e-9) {
+            return Err(Error::Argument(format!(
+                "--holdout {r}: no sphere of radius {r} mm in {}",
+                l.report.session_file.display()
+            )));
+        }
+        if l.spheres.iter().all(|s| (s.radius_mm - r).abs() < 1e-9) {
+            return Err(Error::Argument(format!(
+                "--holdout {r}: every sphere has that radius, nothing is left to fit"
+            )));
+        }
+    }
+    let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
+    let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
+    let mut notes = vec![];
+    let mut model_choice = None;
+    let t_solve = Instant::now();
+    struct Outcome {
+        params: Params,
+        std: [f64; N_PARAMS],
+        status: [String; N_PARAMS],
+        free: [bool; N_PARAMS],
+        correlation: nalgebra::DMatrix<f64>,
+        specular: bool,
+        extensions: Extensions,
+        reduction: Option<ReductionJson>,
+        convergence: ConvergenceJson,
+        per_radius: Option<Vec<RadiusFit>>,
+        paper: Option<paper::PaperFit>,
+    }
+    let outcome = match opts.method {
+        Method::Joint => {
+            let ext = match opts.extensions {
+                ExtensionChoice::None => Extensions::default(),
+                ExtensionChoice::On(e) => e,
+                ExtensionChoice::Auto => {
+                    let t = Instant::now();
+                    let mc = choose_extensions(opts, &l, &fitted);
+                    l.timings.model_choice_s = t.elapsed().as_secs_f64();
+                    let e = parse_extensions(&mc.chosen);
+                    notes.push(format!("model: {} ({})", mc.chosen, mc.reason));
+                    model_choice = Some(mc);
+                    e
+                }
+            };
+            let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            notes.extend(jf.notes.iter().cloned());
+            if !jf.specular {
+                l.skipped.push("specular lobe: off (no usable highlight)".into());
+            }
+            let setting = match opts.reduction {
+                Reduction::Auto => "auto".to_string(),
+                Reduction::None => "none".to_string(),
+                Reduction::Factor(f) => format!("{}°", f as f64 * 0.25),
+            };
+            l.skipped.push(if jf.chosen.width_deg > 0.0 {
+                format!(
+                    "pixels: {} pooled into {} observations ({}° cells, predicted shift {:.2} std)",
+                    jf.pixels, jf.chosen.observations, jf.chosen.width_deg, jf.chosen.predicted_shift_std
+                )
+            } else {
+                format!("pixels: all {} used", jf.pixels)
+            });
+            for k in 0..N_PARAMS {
+                if jf.status[k].starts_with("prior") {
+                    l.skipped.push(format!("{}: {}", PARAM_NAMES[k], jf.status[k]));
+                }
+            }
+            Outcome {
+                params: jf.fit.params,
+                std: jf.fit.std,
+                status: jf.status.clone(),
+                free: jf.fit.free,
+                correlation: jf.fit.correlation.clone(),
+                specular: jf.specular,
+                extensions: Extensions {
+                    sigma_exponent: jf.fit.free[idx::SIGMA_EXPONENT],
+                    albedo_curvature: jf.fit.free[idx::ALBEDO_CURVATURE],
+                },
+                reduction: Some(ReductionJson {
+                    setting,
+                    pixels: jf.pixels,
+                    chosen: jf.chosen.clone(),
+                    levels: jf.levels.clone(),
+                    shift_limit_std: joint::SHIFT_LIMIT,
+                }),
+                convergence: ConvergenceJson {
+                    converged: jf.fit.converged,
+                    stages: jf.stages.clone(),
+                    downweighted: jf.downweighted,
+                    robust_loss: opts.robust.then(|| format!("huber, k = {}", joint::HUBER_K)),
+                },
+                per_radius: None,
+                paper: None,
+            }
+        }
+        Method::Paper => {
+            let Some(light) = l.light else {
+                return Err(Error::invalid(
+                    &l.report.session_file,
+                    "--method paper needs the light direction and the detector found no usable highlight",
+                ));
+            };
+            let pf = paper::fit(&fitted, &light, l.highlight_radius, opts.eta_prior.0);
+            notes.push(format!(
+                "paper: light from the detector, specular peak masked within {:.1}° of the mirror direction, exit Fresnel divided out with η = {}, σ fitted per radius",
+                pf.mask_deg, pf.eta
+            ));
+            let mut status: [String; N_PARAMS] = std::array::from_fn(|_| "fixed".to_string());
+            for s in status.iter_mut().take(6) {
+                *s = "fitted per radius, combined".into();
+            }
+            status[idx::ETA] = format!("fixed: divided out with η = {}", pf.eta);
+            status[idx::KS] = "off: peak masked".into();
+            status[idx::ALPHA] = "off: peak masked".into();
+            status[idx::AZIMUTH] = "fixed: from the detector".into();
+            status[idx::ELEVATION] = "fixed: from the detector".into();
+            status[idx::SIGMA_EXPONENT] = "off".into();
+            status[idx::ALBEDO_CURVATURE] = "off".into();
+            let mut free = [false; N_PARAMS];
+            for f in free.iter_mut().take(6) {
+                *f = true;
+            }
+            Outcome {
+                params: pf.params,
+                std: pf.std,
+                status,
+                free,
+                correlation: nalgebra::DMatrix::identity(6, 6),
+                specular: false,
+                extensions: Extensions::default(),
+                reduction: None,
+                convergence: ConvergenceJson {
+                    converged: pf.converged,
+                    stages: vec![],
+                    downweighted: 0,
+                    robust_loss: None,
+                },
+                per_radius: Some(pf.per_radius.clone()),
+                paper: Some(pf),
+            }
+        }
+    };
+    l.timings.solve_s = t_solve.elapsed().as_secs_f64() - l.timings.model_choice_s;
+    // Predictions per sphere (the held-out one included).
+    let t_hold = Instant::now();
+    let model = Model::default();
+    let spheres: Vec<SphereRmse> = l
+        .spheres
+        .iter()
+        .map(|s| {
+            let p: Prediction = match &outcome.paper {
+                Some(pf) if !is_held(s) => pf.predict(s, PREDICT_PIXELS),
+                // A held-out radius has no per-radius fit: the combined σ0 predicts it.
+                _ => joint::predict(&model, &outcome.params, s, PREDICT_PIXELS),
+            };
+            SphereRmse {
+                image: s.image.clone(),
+                index: s.index,
+                radius_mm: s.radius_mm,
+                pixels: s.obs.len(),
+                saturated: s.saturated,
+                edge: s.edge,
+                noise: s.noise,
+                floor: s.floor,
+                rmse: p.rmse,
+                rel_rmse: p.rel_rmse,
+                lit_rel_rmse: p.lit_rel_rmse,
+                unlit_rel_rmse: p.unlit_rel_rmse,
+                held_out: is_held(s),
+            }
+        })
+        .collect();
+    let holdout = opts.holdout.map(|r| {
+        let held: Vec<&SphereRmse> = spheres.iter().filter(|s| s.held_out).collect();
+        let comb = |f: fn(&SphereRmse) -> f64| {
+            let n: f64 = held.iter().map(|s| s.pixels as f64).sum();
+            (held.iter().map(|s| f(s).powi(2) * s.pixels as f64).sum::<f64>() / n.max(1.0)).sqrt()
+        };
+        HoldoutJson {
+            radius_mm: r,
+            pixels: held.iter().map(|s| s.pixels).sum(),
+            rel_rmse: comb(|s| s.rel_rmse),
+            lit_rel_rmse: comb(|s| s.lit_rel_rmse),
+            unlit_rel_rmse: comb(|s| s.unlit_rel_rmse),
+        }
+    });
+    l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
+    let used: Vec<&SphereRmse> = spheres.iter().filter(|s| !s.held_out).collect();
+    let n: f64 = used.iter().map(|s| s.pixels as f64).sum::<f64>().max(1.0);
+    let overall = (used.iter().map(|s| s.rmse.powi(2) * s.pixels as f64).sum::<f64>() / n).sqrt();
+    let relative =
+        (used.iter().map(|s| s.rel_rmse.powi(2) * s.pixels as f64).sum::<f64>() / n).sqrt();
+    let p = &outcome.params;
+    let m = &p.material;
+    let l_dir = p.light.direction();
+    let light_deg = (outcome.std[idx::AZIMUTH].powi(2) * p.light.elevation.cos().powi(2)
+        + outcome.std[idx::ELEVATION].powi(2))
+    .sqrt()
+    .to_degrees();
+    let free_names: Vec<String> = (0..N_PARAMS)
+        .filter(|&k| outcome.free[k])
+        .map(|k| PARAM_NAMES[k].to_string())
+        .collect();
+    let nc = outcome.correlation.nrows();
+    let fit = FitFile {
+        schema: SCHEMA.into(),
+        method: opts.method,
+        session: l.report.session_file.display().to_string(),
+        detections: l.detections_path.display().to_string(),
+        projection: l.detections.projection.clone(),
+        sigma0_mm: m.sigma0_mm,
+        albedo: m.albedo,
+        eta: m.eta,
+        specular: outcome.specular.then_some(SpecularJson {
+            ks: m.specular.ks,
+            alpha: m.specular.alpha,
+        }),
+        light_direction: [l_dir.x, l_dir.y, l_dir.z],
+        light_azimuth_deg: p.light.azimuth.to_degrees(),
+        light_elevation_deg: p.light.elevation.to_degrees(),
+        sigma_exponent: outcome.extensions.sigma_exponent.then_some(m.sigma_exponent),
+        albedo_curvature: outcome.extensions.albedo_curvature.then_some(m.albedo_curvature),
+        reference_radius_mm: model.reference_radius_mm,
+        std: StdJson {
+            sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
+            albedo: [outcome.std[3], outcome.std[4], outcome.std[5]],
+            eta: outcome.std[idx::ETA],
+            specular: outcome.specular.then_some(SpecularJson {
+                ks: outcome.std[idx::KS],
+                alpha: outcome.std[idx::ALPHA],
+            }),
+            light_deg,
+            sigma_exponent: outcome
+                .extensions
+                .sigma_exponent
+                .then_some(outcome.std[idx::SIGMA_EXPONENT]),
+            albedo_curvature: outcome
+                .extensions
+                .albedo_curvature
+                .then_some(outcome.std[idx::ALBEDO_CURVATURE]),
+        },
+        parameters: (0..N_PARAMS)
+            .map(|k| ParamJson {
+                name: PARAM_NAMES[k].into(),
+                value: p.to_vec()[k],
+                std: outcome.std[k],
+                status: outcome.status[k].clone(),
+            })
+            .collect(),
+        correlation: CorrelationJson {
+            names: if nc == free_names.len() {
+                free_names
+            } else {
+                PARAM_NAMES[..nc].iter().map(|s| s.to_string()).collect()
+            },
+            matrix: (0..nc)
+                .map(|i| (0..nc).map(|j| outcome.correlation[(i, j)]).collect())
+                .collect(),
+        },
+        rmse: RmseJson {
+            overall,
+            relative,
+            spheres,
+        },
+        holdout,
+        per_radius: outcome.per_radius,
+        model_choice,
+        reduction: outcome.reduction,
+        convergence: outcome.convergence,
+        skipped: l.skipped,
+        notes,
+        timings: Timings {
+            total_s: t0.elapsed().as_secs_f64(),
+            ..l.timings
+        },
+    };
+    crate::output::write_json(&out, &fit)?;
+    if let Some(dir) = &opts.plots {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let joint_params = outcome.params;
+        let params_for = |s: &SphereData| match &outcome.paper {
+            Some(pf) if !is_held(s) => pf.params_for(s.radius_mm),
+            _ => joint_params,
+        };
+        let title = match opts.method {
+            Method::Joint => "joint fit",
+            Method::Paper => "paper baseline",
+        };
+        crate::fitplot::write_all(&l.spheres, &params_for, opts.holdout, title, dir)?;
+    }
+    Ok(fit)
+}
+
+/// The one-screen human summary of a fit.
+pub fn summary(f: &FitFile) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let status = |name: &str| {
+        f.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.status.clone())
+            .unwrap_or_default()
+    };
+    let rgb = |v: &[f64; 3], e: &[f64; 3], digits: usize| {
+        format!(
+            "{:.d$} ± {:.d$}, {:.d$} ± {:.d$}, {:.d$} ± {:.d$}",
+            v[0],
+            e[0],
+            v[1],
+            e[1],
+            v[2],
+            e[2],
+            d = digits
+        )
+    };
+    let _ = writeln!(
+        s,
+        "method   {} ({} camera), session {}",
+        match f.method {
+            Method::Joint => "joint",
+            Method::Paper => "paper baseline",
+        },
+        f.projection,
+        f.session
+    );
+    let _ = writeln!(s, "sigma0   {} mm (r, g, b)", rgb(&f.sigma0_mm, &f.std.sigma0_mm, 4));
+    let _ = writeln!(s, "albedo   {}", rgb(&f.albedo, &f.std.albedo, 4));
+    let _ = writeln!(s, "eta      {:.4} ± {:.4}  [{}]", f.eta, f.std.eta, status("eta"));
+    match (&f.specular, &f.std.specular) {
+        (Some(sp), Some(e)) => {
+            let _ = writeln!(
+                s,
+                "specular ks {:.4} ± {:.4} [{}], alpha {:.4} ± {:.4} [{}]",
+                sp.ks,
+                e.ks,
+                status("ks"),
+                sp.alpha,
+                e.alpha,
+                status("alpha")
+            );
+        }
+        _ => {
+            let _ = writeln!(s, "specular none  [{}]", status("ks"));
+        }
+    }
+    let _ = writeln!(
+        s,
+        "light    [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°) ± {:.3}°  [{}]",
+        f.light_direction[0],
+        f.light_direction[1],
+        f.light_direction[2],
+        f.light_azimuth_deg,
+        f.light_elevation_deg,
+        f.std.light_deg,
+        status("light_azimuth")
+    );
+    if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
+        let _ = writeln!(s, "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)", f.reference_radius_mm);
+    }
+    if let (Some(b), Some(e)) = (f.albedo_curvature, f.std.albedo_curvature) {
+        let _ = writeln!(s, "extension albedo_curvature b = {b:.4} ± {e:.4} (r_ref {} mm)", f.reference_radius_mm);
+    }
+    if let Some(pr) = &f.per_radius {
+        for r in pr {
+            let _ = writeln!(
+                s,
+                "radius   {:>6} mm: σ {:.4}, {:.4}, {:.4} rad → σ0 {:.3}, {:.3}, {:.3} mm",
+                r.radius_mm,
+                r.sigma_rad[0],
+                r.sigma_rad[1],
+                r.sigma_rad[2],
+                r.sigma0_mm[0],
+                r.sigma0_mm[1],
+                r.sigma0_mm[2]
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "rmse     {:.3e} ({:.2}% of the data's RMS)",
+        f.rmse.overall,
+        100.0 * f.rmse.relative
+    );
+    for sp in &f.rmse.spheres {
+        let _ = writeln!(
+            s,
+            "sphere   {:<12} #{} r {:>5} mm: {:>8} px, rel. RMSE {:.2}% (lit {:.2}%, unlit {:.2}%){}",
+            sp.image,
+            sp.index + 1,
+            sp.radius_mm,
+            sp.pixels,
+            100.0 * sp.rel_rmse,
+            100.0 * sp.lit_rel_rmse,
+            100.0 * sp.unlit_rel_rmse,
+            if sp.held_out { "  HELD OUT" } else { "" }
+        );
+    }
+    if let Some(h) = &f.holdout {
+        let _ = writeln!(
+            s,
+            "holdout  r {} mm predicted with rel. RMSE {:.2}% (lit {:.2}%, unlit {:.2}%)",
+            h.radius_mm,
+            100.0 * h.rel_rmse,
+            100.0 * h.lit_rel_rmse,
+            100.0 * h.unlit_rel_rmse
+        );
+    }
+    let c = &f.convergence;
+    let evals: usize = c.stages.iter().map(|st| st.evaluations).sum();
+    let _ = writeln!(
+        s,
+        "solver   {} ({} stages, {} evaluations{}){}",
+        if c.converged { "converged" } else { "DID NOT CONVERGE" },
+        c.stages.len(),
+        evals,
+        c.robust_loss
+            .as_ref()
+            .map(|r| format!(", {r}, {} residuals down-weighted", c.downweighted))
+            .unwrap_or_default(),
+        c.stages
+            .last()
+            .map(|st| format!(": {}", st.termination))
+            .unwrap_or_default()
+    );
+    for k in &f.skipped {
+        let _ = writeln!(s, "skipped  {k}");
+    }
+    for n in &f.notes {
+        let _ = writeln!(s, "note     {n}");
+    }
+    let t = &f.timings;
+    let _ = writeln!(
+        s,
+        "time     {:.2} s: detect {:.2}, decode {:.2}, samples {:.2}, solve {:.2}{}{}",
+        t.total_s,
+        t.detect_s,
+        t.decode_s,
+        t.samples_s,
+        t.solve_s,
+        if t.model_choice_s > 0.0 {
+            format!(", model choice {:.2}", t.model_choice_s)
+        } else {
+            String::new()
+        },
+        if t.holdout_s > 0.0 {
+            format!(", predictions {:.2}", t.holdout_s)
+        } else {
+            String::new()
+        }
+    );
+    s
+}
