@@ -14,7 +14,13 @@ fn binned(model: &Model, p: &Params, s: &SphereData) -> Vec<(f64, f64, f64)> {
     let mut bins = vec![(0usize, 0.0, 0.0); 181];
     let stride = (s.obs.len() / 100_000).max(1);
     for o in s.obs.iter().step_by(stride) {
-        let t = o.geometry.normal.dot(&l).clamp(-1.0, 1.0).acos().to_degrees();
+        let t = o
+            .geometry
+            .normal
+            .dot(&l)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
         let b = &mut bins[t.floor() as usize];
         b.0 += 1;
         b.1 += o.radiance[1];

@@ -85,6 +85,9 @@ pub struct Setup {
     /// Start values given by the user (instead of those from the data).
     pub start_sigma0: Option<[f64; 3]>,
     pub start_light: Option<LightAngles>,
+    /// A previous fit of the same scene to start from: the start-value search and the diffuse
+    /// stage are skipped (used to refit subsets, e.g. for held-out errors).
+    pub warm: Option<Params>,
 }
 
 /// One stage's convergence record.
@@ -152,20 +155,37 @@ pub struct JointFit {
     pub specular: bool,
 }
 
-/// The light from the shading alone: the radiance-weighted mean normal (a start value).
-pub fn light_from_shading(spheres: &[&SphereData]) -> Vector3<f64> {
-    let mut s = Vector3::zeros();
-    for sp in spheres {
-        for o in &sp.obs {
-            let l = o.radiance[0] + o.radiance[1] + o.radiance[2];
-            s += o.geometry.normal * l;
+/// The light from the shading alone (a start value when no highlight was found). Where the
+/// blur's kernel does not reach the terminator (θ < 90° − 3σ) the CDRF is cos θ · exp(−σ²/2),
+/// so L / T(φ) = a′ n·l is linear in b = a′ l: a least-squares fit of b over the brightest
+/// pixels (green, L/T above 40% of its maximum), repeated once over the pixels with θ < 60° from
+/// the first estimate, gives l = b / |b| (single-light photometric stereo).
+pub fn light_from_shading(spheres: &[&SphereData], eta: f64) -> Vector3<f64> {
+    let pts: Vec<(Vector3<f64>, f64)> = spheres
+        .iter()
+        .flat_map(|sp| sp.obs.iter())
+        .map(|o| {
+            let g = &o.geometry;
+            let t = fresnel::transmission(g.normal.dot(&g.view), eta).max(1e-3);
+            (g.normal, o.radiance[1] / t)
+        })
+        .collect();
+    let solve = |use_pt: &dyn Fn(&(Vector3<f64>, f64)) -> bool| -> Option<Vector3<f64>> {
+        let mut a = nalgebra::Matrix3::<f64>::zeros();
+        let mut b = Vector3::zeros();
+        for p in pts.iter().filter(|p| use_pt(p)) {
+            a += p.0 * p.0.transpose();
+            b += p.0 * p.1;
         }
-    }
-    if s.norm() > 0.0 {
-        s.normalize()
-    } else {
-        Vector3::new(0.0, 0.0, -1.0)
-    }
+        let x = a.try_inverse()? * b;
+        (x.norm() > 0.0).then(|| x.normalize())
+    };
+    let max = pts.iter().map(|p| p.1).fold(0.0, f64::max);
+    let Some(l1) = solve(&|p| p.1 > 0.4 * max) else {
+        return Vector3::new(0.0, 0.0, -1.0);
+    };
+    let c60 = 60f64.to_radians().cos();
+    solve(&|p| p.0.dot(&l1) > c60 && p.1 > 0.05 * max).unwrap_or(l1)
 }
 
 /// σ0 per channel by a search over a log grid, the albedo in closed form at each point (least
@@ -212,7 +232,11 @@ pub fn diffuse_start(
                 sfl += w2 * f * o.radiance[c];
                 sll += w2 * o.radiance[c] * o.radiance[c];
             }
-            let a = if sff > 0.0 { (sfl / sff).max(1e-6) } else { 1e-3 };
+            let a = if sff > 0.0 {
+                (sfl / sff).max(1e-6)
+            } else {
+                1e-3
+            };
             (a, sll - 2.0 * a * sfl + a * a * sff)
         };
         match sigma0 {
@@ -249,7 +273,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     // Start light.
     let light0 = setup
         .light
-        .unwrap_or_else(|| light_from_shading(spheres));
+        .unwrap_or_else(|| light_from_shading(spheres, setup.eta_prior.0));
     let keep = if highlight {
         setup.highlight_radius.unwrap_or(0.0)
     } else {
@@ -267,9 +291,13 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         .start_light
         .unwrap_or_else(|| LightAngles::from_direction(&light0));
     let (eta_mean, eta_std) = setup.eta_prior;
-    let coarse = pooled.observations(&pooled.merged(16));
-    let coarse = &coarse[..coarse.len() - pooled.kept.len()];
-    let (s0, a0) = diffuse_start(&model, coarse, &start_light, eta_mean, setup.start_sigma0);
+    let (s0, a0) = if setup.warm.is_some() {
+        ([1.0; 3], [1.0; 3])
+    } else {
+        let coarse = pooled.observations(&pooled.merged(16));
+        let coarse = &coarse[..coarse.len() - pooled.kept.len()];
+        diffuse_start(&model, coarse, &start_light, eta_mean, setup.start_sigma0)
+    };
     let mut p = Params {
         material: crate::model::Material {
             sigma0_mm: s0,
@@ -293,7 +321,10 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     free[idx::AZIMUTH] = true;
     free[idx::ELEVATION] = true;
     let mut downweighted = 0;
-    for round in 0..2 {
+    if let Some(w) = setup.warm {
+        p = w;
+    }
+    for round in 0..if setup.warm.is_some() { 0 } else { 2 } {
         let t = std::time::Instant::now();
         let cells = pooled.merged(8);
         let obs: Vec<Obs> = pooled.observations(&cells)[..cells.len()].to_vec();
@@ -319,7 +350,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     }
     // Specular start.
     let mut specular = highlight && !pooled.kept.is_empty();
-    if specular {
+    if specular && setup.warm.is_none() {
         let mut unit = p;
         unit.material.albedo = [0.0; 3];
         unit.material.specular.ks = 1.0;
@@ -464,7 +495,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
                         mean: eta_mean,
                         std: eta_std,
                     });
-                    status[k] = format!("prior {eta_mean} ± {eta_std} (free fit: ± {:.3})", f.std[k]);
+                    status[k] =
+                        format!("prior {eta_mean} ± {eta_std} (free fit: ± {:.3})", f.std[k]);
                     notes.push(format!(
                         "η is not determined by these data (std {:.3}): held at its prior {eta_mean} ± {eta_std}",
                         f.std[k]
@@ -473,7 +505,10 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
                 idx::ALPHA => {
                     free[k] = false;
                     p.material.specular.alpha = setup.alpha.unwrap_or(ALPHA_PRIOR);
-                    status[k] = format!("held at {} (free fit: ± {:.3})", p.material.specular.alpha, f.std[k]);
+                    status[k] = format!(
+                        "held at {} (free fit: ± {:.3})",
+                        p.material.specular.alpha, f.std[k]
+                    );
                     notes.push(format!("α is not determined (std {:.3}): held", f.std[k]));
                 }
                 idx::KS => {

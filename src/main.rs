@@ -133,12 +133,16 @@ fn parse_reduce(s: &str) -> std::result::Result<workbench::joint::Reduction, Str
         "auto" => Ok(Reduction::Auto),
         "none" | "0" => Ok(Reduction::None),
         _ => {
-            let w: f64 = s.parse().map_err(|_| format!("expected auto, none or degrees, got {s:?}"))?;
+            let w: f64 = s
+                .parse()
+                .map_err(|_| format!("expected auto, none or degrees, got {s:?}"))?;
             let f = (w / 0.25).round() as u32;
             if workbench::reduce::FACTORS.contains(&f) && (f as f64 * 0.25 - w).abs() < 1e-9 {
                 Ok(Reduction::Factor(f))
             } else {
-                Err(format!("cell width must be 0.25, 0.5, 1, 2 or 4 degrees, got {s}"))
+                Err(format!(
+                    "cell width must be 0.25, 0.5, 1, 2 or 4 degrees, got {s}"
+                ))
             }
         }
     }
@@ -163,7 +167,11 @@ fn parse_extensions(s: &str) -> std::result::Result<workbench::solve::ExtensionC
         match part.trim() {
             "sigma-exponent" => e.sigma_exponent = true,
             "albedo-curvature" => e.albedo_curvature = true,
-            other => return Err(format!("unknown extension {other:?} (sigma-exponent, albedo-curvature)")),
+            other => {
+                return Err(format!(
+                    "unknown extension {other:?} (sigma-exponent, albedo-curvature)"
+                ))
+            }
         }
     }
     Ok(ExtensionChoice::On(e))
@@ -743,7 +751,10 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         println!("figures  {}", d.display());
     }
     if !f.convergence.converged {
-        eprintln!("error: the fit did not converge (see convergence in {})", out.display());
+        eprintln!(
+            "error: the fit did not converge (see convergence in {})",
+            out.display()
+        );
         std::process::exit(3);
     }
     Ok(())

@@ -16,7 +16,7 @@ use crate::model::Geometry;
 use crate::outline::Projection;
 use crate::photo::load_linear_rgb;
 use crate::samples::{self, Sample};
-use crate::session::{SessionReport, Session};
+use crate::session::{Session, SessionReport};
 use crate::solver::Obs;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -146,7 +146,11 @@ pub fn observe(
             let boxes: Vec<[u32; 4]> = d
                 .spheres
                 .iter()
-                .filter_map(|s| s.outline.outline().pixel_box(proj, 2.0, img.width, img.height))
+                .filter_map(|s| {
+                    s.outline
+                        .outline()
+                        .pixel_box(proj, 2.0, img.width, img.height)
+                })
                 .collect();
             background(img, &boxes).map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
         })
@@ -190,8 +194,8 @@ pub fn observe(
             }
             let noise = pixel_noise(&smp);
             // A sphere without measurable noise (a noise-free render): one level unit.
-            let floor = 0.5 / ((1u32 << images[i].bits.min(16)) as f64)
-                / info.exposure.unwrap_or(1.0);
+            let floor =
+                0.5 / ((1u32 << images[i].bits.min(16)) as f64) / info.exposure.unwrap_or(1.0);
             let noise = noise.map(|n| if n.is_finite() && n > floor { n } else { floor });
             let mut out = SphereData {
                 image: info.file.clone(),

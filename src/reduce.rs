@@ -121,7 +121,8 @@ impl Pooled {
             }
             let (t, p, side) = angles(g, &self.light);
             let key = ((t / w).floor() as i64, (p / w).floor() as i64, side);
-            let d2 = (t - (key.0 as f64 + 0.5) * w).powi(2) + (p - (key.1 as f64 + 0.5) * w).powi(2);
+            let d2 =
+                (t - (key.0 as f64 + 0.5) * w).powi(2) + (p - (key.1 as f64 + 0.5) * w).powi(2);
             let c = map.entry(key).or_insert(Cell {
                 sphere,
                 key,
@@ -235,13 +236,7 @@ impl Pooled {
     /// standard errors: (JᵀJ)⁻¹ Jᵀ b / σ, with J the weighted Jacobian at `p` and b the
     /// [`biases`](Self::biases). Returns the largest |shift| over the parameters (∞ when JᵀJ is
     /// singular).
-    pub fn shift(
-        &self,
-        cells: &[Cell],
-        model: &Model,
-        p: &Params,
-        free: [bool; N_PARAMS],
-    ) -> f64 {
+    pub fn shift(&self, cells: &[Cell], model: &Model, p: &Params, free: [bool; N_PARAMS]) -> f64 {
         let obs = self.observations(cells);
         let problem = crate::solver::Problem {
             model: *model,

@@ -307,6 +307,8 @@ pub struct Refined {
 }
 
 const SECTORS: usize = 48;
+/// The fewest sectors (small spheres).
+const MIN_SECTORS: usize = 8;
 const SUBSAMPLES: usize = 2;
 const SUB: usize = SUBSAMPLES;
 /// Index of refraction of the limb's exit-transmission term (its shape near grazing changes
@@ -338,7 +340,7 @@ const GH_W: [f64; 5] = [
 
 struct BandPixel {
     value: f64,
-    /// Image index × SECTORS + angular sector.
+    /// Image index × sectors + angular sector.
     sector: usize,
     /// Sub-sample points.
     q: [Vector3<f64>; SUB * SUB],
@@ -488,6 +490,9 @@ pub fn refine(
     let (width, height) = (images[0].0.width, images[0].0.height);
     let [x0, y0, x1, y1] = start.pixel_box(proj, outer_px + 2.0, width, height)?;
     let center_px = proj.pixel(&start.center_point())?;
+    // Fewer sectors on small spheres: each needs 4 × NLIN band pixels for its linear terms.
+    let band_area = std::f64::consts::TAU * r_px * (inner_px + outer_px);
+    let nsec = ((band_area / (4 * NLIN) as f64) as usize).clamp(MIN_SECTORS, SECTORS);
     // Geometry of the band, shared by all photos.
     let mut geo = vec![];
     for y in y0..=y1 {
@@ -514,8 +519,8 @@ pub fn refine(
                 continue;
             }
             let a = (px - center_px).y.atan2((px - center_px).x);
-            let t = (a + std::f64::consts::PI) / std::f64::consts::TAU * SECTORS as f64;
-            let sector = (t as usize).min(SECTORS - 1);
+            let t = (a + std::f64::consts::PI) / std::f64::consts::TAU * nsec as f64;
+            let sector = (t as usize).min(nsec - 1);
             geo.push((x, y, sector, qs, t - sector as f64 - 0.5));
         }
     }
@@ -530,13 +535,13 @@ pub fn refine(
             }
             band.push(BandPixel {
                 value: img.at(*x, *y) as f64,
-                sector: i * SECTORS + sector,
+                sector: i * nsec + sector,
                 q: *qs,
                 dpsi: *dpsi,
             });
         }
     }
-    let sectors = images.len() * SECTORS;
+    let sectors = images.len() * nsec;
     if band.len() < 50 {
         return None;
     }

@@ -289,7 +289,10 @@ fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detectio
         && d.images.iter().zip(&report.images).all(|(a, b)| {
             a.file == b.file
                 && a.spheres.len() == b.radii_mm.len()
-                && a.spheres.iter().zip(&b.radii_mm).all(|(s, r)| s.radius_mm == *r)
+                && a.spheres
+                    .iter()
+                    .zip(&b.radii_mm)
+                    .all(|(s, r)| s.radius_mm == *r)
         });
     let proj = if report.camera.is_some() {
         "perspective"
@@ -417,12 +420,15 @@ fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> S
         extensions: ext,
         start_sigma0: opts.start_sigma0,
         start_light: opts.start_light,
+        warm: None,
     }
 }
 
 /// Choose the extensions by held-out error: each candidate is fitted with every radius left out
-/// in turn (2° cells) and predicts that radius's pixels; the candidate with the lowest mean
-/// relative RMSE wins if it beats the plain model by more than 2% of its error.
+/// in turn (4° cells: the choice compares errors of percents, not of standard errors) and
+/// predicts that radius's pixels; the candidate with the lowest mean
+/// relative RMSE (the simplest within 1% of it) wins if it beats the plain model by more than 2%
+/// of its error.
 pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> ModelChoice {
     let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
     radii.sort_by(|a, b| a.total_cmp(b));
@@ -452,6 +458,11 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
             ),
         };
     }
+    // Every refit starts from the plain model's fit to all the spheres.
+    let base = joint::fit_joint(
+        &setup(opts, l, Extensions::default(), Reduction::Factor(16)),
+        fitted,
+    );
     let results: Vec<Candidate> = candidates
         .iter()
         .map(|&ext| {
@@ -468,7 +479,9 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
                     .copied()
                     .filter(|s| s.radius_mm == r)
                     .collect();
-                let jf = joint::fit_joint(&setup(opts, l, ext, Reduction::Factor(8)), &train);
+                let mut su = setup(opts, l, ext, Reduction::Factor(16));
+                su.warm = Some(base.fit.params);
+                let jf = joint::fit_joint(&su, &train);
                 ok &= jf.fit.converged;
                 let (mut d, mut o) = (0.0, 0.0);
                 for s in test {
@@ -486,10 +499,16 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
         })
         .collect();
     let plain = results[0].heldout_rel_rmse;
-    let best = results
+    // The best, or the simplest candidate within 1% of the best's error (candidates are listed
+    // simplest first, and the two single extensions before the pair).
+    let lowest = results
         .iter()
         .filter(|c| c.converged)
-        .min_by(|a, b| a.heldout_rel_rmse.total_cmp(&b.heldout_rel_rmse))
+        .map(|c| c.heldout_rel_rmse)
+        .fold(f64::INFINITY, f64::min);
+    let best = results
+        .iter()
+        .find(|c| c.converged && c.heldout_rel_rmse <= 1.01 * lowest)
         .cloned()
         .unwrap_or(results[0].clone());
     let (chosen, reason) = if best.extensions != "plain" && best.heldout_rel_rmse < 0.98 * plain {
@@ -580,7 +599,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
             notes.extend(jf.notes.iter().cloned());
             if !jf.specular {
-                l.skipped.push("specular lobe: off (no usable highlight)".into());
+                l.skipped
+                    .push("specular lobe: off (no usable highlight)".into());
             }
             let setting = match opts.reduction {
                 Reduction::Auto => "auto".to_string(),
@@ -590,14 +610,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             l.skipped.push(if jf.chosen.width_deg > 0.0 {
                 format!(
                     "pixels: {} pooled into {} observations ({}° cells, predicted shift {:.2} std)",
-                    jf.pixels, jf.chosen.observations, jf.chosen.width_deg, jf.chosen.predicted_shift_std
+                    jf.pixels,
+                    jf.chosen.observations,
+                    jf.chosen.width_deg,
+                    jf.chosen.predicted_shift_std
                 )
             } else {
                 format!("pixels: all {} used", jf.pixels)
             });
             for k in 0..N_PARAMS {
                 if jf.status[k].starts_with("prior") {
-                    l.skipped.push(format!("{}: {}", PARAM_NAMES[k], jf.status[k]));
+                    l.skipped
+                        .push(format!("{}: {}", PARAM_NAMES[k], jf.status[k]));
                 }
             }
             Outcome {
@@ -622,7 +646,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                     converged: jf.fit.converged,
                     stages: jf.stages.clone(),
                     downweighted: jf.downweighted,
-                    robust_loss: opts.robust.then(|| format!("huber, k = {}", joint::HUBER_K)),
+                    robust_loss: opts
+                        .robust
+                        .then(|| format!("huber, k = {}", joint::HUBER_K)),
                 },
                 per_radius: None,
                 paper: None,
@@ -709,7 +735,12 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         let held: Vec<&SphereRmse> = spheres.iter().filter(|s| s.held_out).collect();
         let comb = |f: fn(&SphereRmse) -> f64| {
             let n: f64 = held.iter().map(|s| s.pixels as f64).sum();
-            (held.iter().map(|s| f(s).powi(2) * s.pixels as f64).sum::<f64>() / n.max(1.0)).sqrt()
+            (held
+                .iter()
+                .map(|s| f(s).powi(2) * s.pixels as f64)
+                .sum::<f64>()
+                / n.max(1.0))
+            .sqrt()
         };
         HoldoutJson {
             radius_mm: r,
@@ -722,9 +753,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     let used: Vec<&SphereRmse> = spheres.iter().filter(|s| !s.held_out).collect();
     let n: f64 = used.iter().map(|s| s.pixels as f64).sum::<f64>().max(1.0);
-    let overall = (used.iter().map(|s| s.rmse.powi(2) * s.pixels as f64).sum::<f64>() / n).sqrt();
-    let relative =
-        (used.iter().map(|s| s.rel_rmse.powi(2) * s.pixels as f64).sum::<f64>() / n).sqrt();
+    let overall = (used
+        .iter()
+        .map(|s| s.rmse.powi(2) * s.pixels as f64)
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let relative = (used
+        .iter()
+        .map(|s| s.rel_rmse.powi(2) * s.pixels as f64)
+        .sum::<f64>()
+        / n)
+        .sqrt();
     let p = &outcome.params;
     let m = &p.material;
     let l_dir = p.light.direction();
@@ -753,8 +793,14 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         light_direction: [l_dir.x, l_dir.y, l_dir.z],
         light_azimuth_deg: p.light.azimuth.to_degrees(),
         light_elevation_deg: p.light.elevation.to_degrees(),
-        sigma_exponent: outcome.extensions.sigma_exponent.then_some(m.sigma_exponent),
-        albedo_curvature: outcome.extensions.albedo_curvature.then_some(m.albedo_curvature),
+        sigma_exponent: outcome
+            .extensions
+            .sigma_exponent
+            .then_some(m.sigma_exponent),
+        albedo_curvature: outcome
+            .extensions
+            .albedo_curvature
+            .then_some(m.albedo_curvature),
         reference_radius_mm: model.reference_radius_mm,
         std: StdJson {
             sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
@@ -859,9 +905,19 @@ pub fn summary(f: &FitFile) -> String {
         f.projection,
         f.session
     );
-    let _ = writeln!(s, "sigma0   {} mm (r, g, b)", rgb(&f.sigma0_mm, &f.std.sigma0_mm, 4));
+    let _ = writeln!(
+        s,
+        "sigma0   {} mm (r, g, b)",
+        rgb(&f.sigma0_mm, &f.std.sigma0_mm, 4)
+    );
     let _ = writeln!(s, "albedo   {}", rgb(&f.albedo, &f.std.albedo, 4));
-    let _ = writeln!(s, "eta      {:.4} ± {:.4}  [{}]", f.eta, f.std.eta, status("eta"));
+    let _ = writeln!(
+        s,
+        "eta      {:.4} ± {:.4}  [{}]",
+        f.eta,
+        f.std.eta,
+        status("eta")
+    );
     match (&f.specular, &f.std.specular) {
         (Some(sp), Some(e)) => {
             let _ = writeln!(
@@ -891,10 +947,18 @@ pub fn summary(f: &FitFile) -> String {
         status("light_azimuth")
     );
     if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
-        let _ = writeln!(s, "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)", f.reference_radius_mm);
+        let _ = writeln!(
+            s,
+            "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)",
+            f.reference_radius_mm
+        );
     }
     if let (Some(b), Some(e)) = (f.albedo_curvature, f.std.albedo_curvature) {
-        let _ = writeln!(s, "extension albedo_curvature b = {b:.4} ± {e:.4} (r_ref {} mm)", f.reference_radius_mm);
+        let _ = writeln!(
+            s,
+            "extension albedo_curvature b = {b:.4} ± {e:.4} (r_ref {} mm)",
+            f.reference_radius_mm
+        );
     }
     if let Some(pr) = &f.per_radius {
         for r in pr {
@@ -946,7 +1010,11 @@ pub fn summary(f: &FitFile) -> String {
     let _ = writeln!(
         s,
         "solver   {} ({} stages, {} evaluations{}){}",
-        if c.converged { "converged" } else { "DID NOT CONVERGE" },
+        if c.converged {
+            "converged"
+        } else {
+            "DID NOT CONVERGE"
+        },
         c.stages.len(),
         evals,
         c.robust_loss

@@ -180,7 +180,13 @@ impl Problem<'_> {
         let params = Params::from_vec(&p);
         let free = self.free_idx();
         let n = free.len();
-        let zero = || (DMatrix::<f64>::zeros(n, n), DVector::<f64>::zeros(n), 0.0f64);
+        let zero = || {
+            (
+                DMatrix::<f64>::zeros(n, n),
+                DVector::<f64>::zeros(n),
+                0.0f64,
+            )
+        };
         let (mut jtj, mut jtr, rtr) = self
             .obs
             .par_chunks(2048)
@@ -209,7 +215,9 @@ impl Problem<'_> {
                 }
                 (a, b, c)
             })
-            .reduce(zero, |(a1, b1, c1), (a2, b2, c2)| (a1 + a2, b1 + b2, c1 + c2));
+            .reduce(zero, |(a1, b1, c1), (a2, b2, c2)| {
+                (a1 + a2, b1 + b2, c1 + c2)
+            });
         for i in 0..n {
             for j in 0..i {
                 jtj[(j, i)] = jtj[(i, j)];
@@ -268,7 +276,10 @@ impl<'a> Reduced<'a> {
             return;
         }
         let n = ne.jtr.len();
-        let scale = (0..n).map(|i| ne.jtj[(i, i)]).fold(0.0, f64::max).max(1e-300);
+        let scale = (0..n)
+            .map(|i| ne.jtj[(i, i)])
+            .fold(0.0, f64::max)
+            .max(1e-300);
         let mut ridge = 0.0;
         let chol = loop {
             let mut a = ne.jtj.clone();
@@ -278,7 +289,11 @@ impl<'a> Reduced<'a> {
             if let Some(c) = a.cholesky() {
                 break Some(c);
             }
-            ridge = if ridge == 0.0 { 1e-14 * scale } else { ridge * 100.0 };
+            ridge = if ridge == 0.0 {
+                1e-14 * scale
+            } else {
+                ridge * 100.0
+            };
             if ridge > 1e-4 * scale {
                 break None;
             }
@@ -344,9 +359,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         let r = self.evaluate(false).0;
         let ok = r.iter().all(|v| v.is_finite());
         if let Some(h) = &self.history {
-            h.lock()
-                .expect("history lock")
-                .push(if ok { 0.5 * r.norm_squared() } else { f64::NAN });
+            h.lock().expect("history lock").push(if ok {
+                0.5 * r.norm_squared()
+            } else {
+                f64::NAN
+            });
         }
         ok.then_some(r)
     }

@@ -187,7 +187,10 @@ fn recovers_known_parameters_from_a_bad_start() {
     assert_eq!(f.correlation.nrows(), N_PARAMS - 3);
     // The cost history ends at the final cost and never ends above its start.
     assert!(f.history.len() >= f.evaluations.min(2));
-    assert!((f.history.last().unwrap() - f.cost).abs() <= 1e-9 * f.cost.max(1e-12) + 1e-12 || f.history.iter().any(|c| (c - f.cost).abs() < 1e-9 * f.cost));
+    assert!(
+        (f.history.last().unwrap() - f.cost).abs() <= 1e-9 * f.cost.max(1e-12) + 1e-12
+            || f.history.iter().any(|c| (c - f.cost).abs() < 1e-9 * f.cost)
+    );
     assert!(f.cost < f.history[0]);
 }
 
@@ -275,7 +278,10 @@ fn pooled_cells_fit_like_every_pixel_and_the_predicted_shift_says_how_far() {
         assert!(w[1].1 > w[0].1, "{measured:?}");
     }
     let (z4, p4) = measured[3];
-    assert!(z4 > 1.0 && p4 > 0.5 * z4 && p4 < 2.0 * z4, "4°: measured {z4}, predicted {p4}");
+    assert!(
+        z4 > 1.0 && p4 > 0.5 * z4 && p4 < 2.0 * z4,
+        "4°: measured {z4}, predicted {p4}"
+    );
 }
 
 #[test]
@@ -307,6 +313,12 @@ fn a_prior_combines_with_the_data_as_two_gaussians_do() {
         both.params.material.eta, both.std[idx::ETA]
     );
     assert!(both.converged && data.converged);
-    assert!((both.params.material.eta - mean).abs() < 0.2 * std, "posterior mean");
-    assert!((both.std[idx::ETA] / std - 1.0).abs() < 0.1, "posterior std");
+    assert!(
+        (both.params.material.eta - mean).abs() < 0.2 * std,
+        "posterior mean"
+    );
+    assert!(
+        (both.std[idx::ETA] / std - 1.0).abs() < 0.1,
+        "posterior std"
+    );
 }

@@ -1,0 +1,357 @@
+//! `workbench solve` against ground truth: synthetic sessions rendered by the project's forward
+//! model with known material and light (truth.json), through detection, sampling and the fit.
+
+use nalgebra::Vector3;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use workbench::joint::{Extensions, Reduction};
+use workbench::solve::{self, ExtensionChoice, FitFile, Method, Options};
+use workbench::synth::session::{self, SessionConfig, SessionTruth};
+
+/// A 640×480 camera: a quarter of the default's pixels, so that the tests stay fast.
+fn small(cfg: SessionConfig) -> SessionConfig {
+    let mut cam = session::default_camera();
+    cam.fx = 700.0;
+    cam.fy = 700.0;
+    cam.cx = 321.6;
+    cam.cy = 239.3;
+    cam.image_size = [640, 480];
+    SessionConfig { camera: cam, ..cfg }
+}
+
+fn make(cfg: SessionConfig) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    session::generate(&small(cfg), dir.path(), None, true).unwrap();
+    dir
+}
+
+fn truth(dir: &Path) -> SessionTruth {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap()
+}
+
+/// The default session (five radii, 1% noise, 16-bit PNG), generated once for the tests here.
+fn default_session() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    DIR.get_or_init(|| make(SessionConfig::default())).path()
+}
+
+fn solve_with(dir: &Path, name: &str, f: impl FnOnce(&mut Options)) -> FitFile {
+    let mut o = Options::new(dir);
+    o.out = Some(dir.join(name));
+    f(&mut o);
+    solve::run(&o).unwrap()
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}
+
+fn light_err(f: &FitFile, t: &SessionTruth) -> f64 {
+    Vector3::from(f.light_direction)
+        .angle(&Vector3::from(t.light_direction))
+        .to_degrees()
+}
+
+fn worst(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    (0..3).map(|c| rel(a[c], b[c])).fold(0.0, f64::max)
+}
+
+#[test]
+fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
+    let dir = default_session();
+    let t = truth(dir);
+    let f = solve_with(dir, "fit-joint.json", |_| {});
+    let (es, ea, el) = (
+        worst(&f.sigma0_mm, &t.sigma0_mm),
+        worst(&f.albedo, &t.albedo),
+        light_err(&f, &t),
+    );
+    println!(
+        "joint: σ0 {:.4?} (worst {:.3}%), albedo worst {:.3}%, light {el:.4}°, η {:.4} ± {:.4}, ks {:.4}, α {:.4}; {:.2} s",
+        f.sigma0_mm,
+        100.0 * es,
+        100.0 * ea,
+        f.eta,
+        f.std.eta,
+        f.specular.unwrap().ks,
+        f.specular.unwrap().alpha,
+        f.timings.solve_s
+    );
+    assert_eq!(f.schema, "workbench.fit/1");
+    assert!(f.convergence.converged);
+    assert!(es < 0.01, "σ0 {es}");
+    assert!(ea < 0.01, "albedo {ea}");
+    assert!(el < 0.1, "light {el}°");
+    let sp = f.specular.unwrap();
+    assert!(rel(sp.alpha, t.specular.alpha) < 0.05, "α {}", sp.alpha);
+    // ks carries F(η) with η at its prior: within the prior's reach.
+    assert!(rel(sp.ks, t.specular.ks) < 0.1, "ks {}", sp.ks);
+    // η rests on its prior (1.45 ± 0.05) and on T(φ): within the prior's width of the truth.
+    assert!(f.std.eta <= 0.05 + 1e-12);
+    assert!((f.eta - t.eta).abs() < 0.05);
+    let eta = f.parameters.iter().find(|p| p.name == "eta").unwrap();
+    assert!(eta.status.starts_with("prior 1.45"), "{}", eta.status);
+    // Standard errors and correlations are there and finite.
+    assert!(f.std.sigma0_mm.iter().all(|s| s.is_finite() && *s > 0.0));
+    let n = f.correlation.names.len();
+    assert_eq!(f.correlation.matrix.len(), n);
+    for i in 0..n {
+        assert!((f.correlation.matrix[i][i] - 1.0).abs() < 1e-9);
+    }
+    // Every sphere's residual is at the noise level (1% shot noise): not more than 3%.
+    assert_eq!(f.rmse.spheres.len(), 5);
+    for s in &f.rmse.spheres {
+        assert!(s.rel_rmse < 0.03, "{} {}", s.image, s.rel_rmse);
+    }
+    // The reduction chosen keeps the predicted shift under its limit, with fewer observations.
+    let red = f.reduction.as_ref().unwrap();
+    assert!(red.chosen.predicted_shift_std <= 0.3);
+    assert!(red.chosen.observations < red.pixels);
+    // What was reused and skipped is listed.
+    assert!(f.skipped.iter().any(|s| s.starts_with("calibration")));
+    assert!(f.skipped.iter().any(|s| s.starts_with("detection")));
+    // Stages record their cost history.
+    for st in &f.convergence.stages {
+        assert!(!st.cost_history.is_empty());
+        assert!(st.cost_end <= st.cost_start * (1.0 + 1e-9), "{}", st.name);
+    }
+    // A second run on unchanged inputs reuses detections.json.
+    let again = solve_with(dir, "fit-again.json", |_| {});
+    assert!(
+        again
+            .skipped
+            .iter()
+            .any(|s| s.contains("detections.json reused")),
+        "{:?}",
+        again.skipped
+    );
+    assert_eq!(again.sigma0_mm, f.sigma0_mm);
+}
+
+#[test]
+fn a_known_irradiance_makes_eta_measurable() {
+    let dir = default_session();
+    let t = truth(dir);
+    // The synthetic light's irradiance is 1 in radiance units (ks = 1 is the physical lobe).
+    let f = solve_with(dir, "fit-irradiance.json", |o| o.irradiance = Some(1.0));
+    println!(
+        "irradiance 1: η {:.4} ± {:.4} (truth {}), σ0 worst {:.3}%",
+        f.eta,
+        f.std.eta,
+        t.eta,
+        100.0 * worst(&f.sigma0_mm, &t.sigma0_mm)
+    );
+    assert!((f.eta - t.eta).abs() < 0.02, "η {}", f.eta);
+    let ks = f.parameters.iter().find(|p| p.name == "ks").unwrap();
+    assert!(ks.status.starts_with("fixed"), "{}", ks.status);
+    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.01);
+}
+
+#[test]
+fn a_bad_start_still_converges() {
+    let dir = default_session();
+    let t = truth(dir);
+    // Light 30° off the truth (70°, 20°) and σ0 ten times too large.
+    let f = solve_with(dir, "fit-bad-start.json", |o| {
+        o.start_light = Some(workbench::model::LightAngles {
+            azimuth: 40f64.to_radians(),
+            elevation: 15f64.to_radians(),
+        });
+        o.start_sigma0 = Some(t.sigma0_mm.map(|s| 10.0 * s));
+    });
+    println!(
+        "bad start: σ0 worst {:.3}%, light {:.4}°, {} stages",
+        100.0 * worst(&f.sigma0_mm, &t.sigma0_mm),
+        light_err(&f, &t),
+        f.convergence.stages.len()
+    );
+    assert!(f.convergence.converged);
+    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.01);
+    assert!(light_err(&f, &t) < 0.1);
+}
+
+#[test]
+fn paper_baseline_and_holdout() {
+    let dir = default_session();
+    let t = truth(dir);
+    let p = solve_with(dir, "fit-paper.json", |o| o.method = Method::Paper);
+    let pr = p.per_radius.as_ref().unwrap();
+    assert_eq!(pr.len(), 5);
+    for r in pr {
+        println!(
+            "paper r {}: σ0 {:.3?} (σ {:.4?} rad), albedo {:.3?}",
+            r.radius_mm, r.sigma0_mm, r.sigma_rad, r.albedo
+        );
+        assert!((r.sigma_rad[1] * r.radius_mm - r.sigma0_mm[1]).abs() < 1e-9);
+        assert!(worst(&r.sigma0_mm, &t.sigma0_mm) < 0.1);
+    }
+    assert!(p.specular.is_none());
+    assert_eq!(p.method, Method::Paper);
+    // The light is the detector's, not refined.
+    let d: workbench::detect::Detections =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("detections.json")).unwrap())
+            .unwrap();
+    let dl = Vector3::from(d.light_direction.unwrap());
+    assert!(Vector3::from(p.light_direction).angle(&dl) < 1e-9);
+    // Holdout: fit without the 15 mm sphere, predict it.
+    let h = solve_with(dir, "fit-holdout.json", |o| o.holdout = Some(15.0));
+    let ho = h.holdout.as_ref().unwrap();
+    let fitted: Vec<f64> = h
+        .rmse
+        .spheres
+        .iter()
+        .filter(|s| !s.held_out)
+        .map(|s| s.rel_rmse)
+        .collect();
+    let mean = fitted.iter().sum::<f64>() / fitted.len() as f64;
+    println!(
+        "holdout 15 mm: rel. RMSE {:.4} (lit {:.4}, unlit {:.4}); fitted spheres {mean:.4}",
+        ho.rel_rmse, ho.lit_rel_rmse, ho.unlit_rel_rmse
+    );
+    assert!(ho.rel_rmse < 1.5 * mean, "{} vs {mean}", ho.rel_rmse);
+    assert_eq!(h.rmse.spheres.iter().filter(|s| s.held_out).count(), 1);
+    // A radius that is not there is refused.
+    let mut o = Options::new(dir);
+    o.out = Some(dir.join("never.json"));
+    o.holdout = Some(17.0);
+    let e = solve::run(&o).unwrap_err().to_string();
+    assert!(e.contains("--holdout 17") && !e.contains('\n'), "{e}");
+    assert!(!dir.join("never.json").exists());
+}
+
+#[test]
+fn every_pixel_and_the_chosen_reduction_agree() {
+    let dir = default_session();
+    let auto = solve_with(dir, "fit-auto.json", |_| {});
+    let all = solve_with(dir, "fit-all.json", |o| o.reduction = Reduction::None);
+    let coarse = solve_with(dir, "fit-4deg.json", |o| {
+        o.reduction = Reduction::Factor(16)
+    });
+    let z = |f: &FitFile| {
+        (0..3)
+            .map(|c| (f.sigma0_mm[c] - all.sigma0_mm[c]).abs() / all.std.sigma0_mm[c])
+            .fold(0.0, f64::max)
+    };
+    println!(
+        "σ0 against every pixel: auto ({}° cells, {} obs) {:.2} std, 4° cells {:.2} std; every pixel {} obs",
+        auto.reduction.as_ref().unwrap().chosen.width_deg,
+        auto.reduction.as_ref().unwrap().chosen.observations,
+        z(&auto),
+        z(&coarse),
+        all.reduction.as_ref().unwrap().chosen.observations
+    );
+    assert!(z(&auto) < 1.0);
+    assert!(z(&coarse) > z(&auto));
+}
+
+#[test]
+fn no_highlight_no_lobe_and_the_light_from_shading() {
+    let dir = make(SessionConfig {
+        radii_mm: vec![35.0, 25.0, 15.0],
+        material: workbench::model::Material {
+            specular: workbench::model::SpecularParams {
+                ks: 0.0,
+                alpha: 0.1,
+            },
+            ..SessionConfig::default().material
+        },
+        ..SessionConfig::default()
+    });
+    let t = truth(dir.path());
+    let f = solve_with(dir.path(), "fit.json", |_| {});
+    println!(
+        "no highlight: σ0 worst {:.3}%, light {:.4}°",
+        100.0 * worst(&f.sigma0_mm, &t.sigma0_mm),
+        light_err(&f, &t)
+    );
+    assert!(f.specular.is_none());
+    let ks = f.parameters.iter().find(|p| p.name == "ks").unwrap();
+    assert!(ks.status.starts_with("off"), "{}", ks.status);
+    assert!(f
+        .skipped
+        .iter()
+        .any(|s| s.starts_with("specular lobe: off")));
+    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.01);
+    assert!(light_err(&f, &t) < 0.2);
+}
+
+#[test]
+fn one_radius_still_fits_with_a_wider_uncertainty() {
+    let dir = make(SessionConfig {
+        radii_mm: vec![25.0],
+        ..SessionConfig::default()
+    });
+    let t = truth(dir.path());
+    let f = solve_with(dir.path(), "fit.json", |o| {
+        o.extensions = ExtensionChoice::On(Extensions {
+            sigma_exponent: true,
+            albedo_curvature: false,
+        })
+    });
+    let five = solve_with(default_session(), "fit-five.json", |_| {});
+    println!(
+        "one radius: σ0 {:.4?} ± {:.4?}; five radii ± {:.4?}",
+        f.sigma0_mm, f.std.sigma0_mm, five.std.sigma0_mm
+    );
+    assert!(f.convergence.converged);
+    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.02);
+    assert!(f.std.sigma0_mm[1] > five.std.sigma0_mm[1]);
+    // An extension is never fitted from one radius.
+    assert!(f.sigma_exponent.is_none());
+    assert!(f.notes.iter().any(|n| n.contains("need at least 3")));
+}
+
+#[test]
+fn extensions_are_chosen_by_held_out_error() {
+    // Truth with σ·r growing as r shrinks (q = 0.6): the plain model cannot follow it.
+    let mut m = SessionConfig::default().material;
+    m.sigma_exponent = 0.6;
+    let dir = make(SessionConfig {
+        radii_mm: vec![35.0, 28.0, 21.0, 15.0],
+        material: m,
+        ..SessionConfig::default()
+    });
+    let f = solve_with(dir.path(), "fit.json", |o| {
+        o.extensions = ExtensionChoice::Auto
+    });
+    let mc = f.model_choice.as_ref().unwrap();
+    for c in &mc.candidates {
+        println!("  {}: held-out {:.4}", c.extensions, c.heldout_rel_rmse);
+    }
+    println!(
+        "chosen {} ({}), q = {:?} ± {:?}",
+        mc.chosen, mc.reason, f.sigma_exponent, f.std.sigma_exponent
+    );
+    assert!(mc.chosen.contains("sigma-exponent"), "{}", mc.chosen);
+    assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 0.05);
+    // On plain data the plain model is kept.
+    let plain = solve_with(default_session(), "fit-ext.json", |o| {
+        o.extensions = ExtensionChoice::Auto
+    });
+    let pc = plain.model_choice.as_ref().unwrap();
+    println!("plain data: chosen {} ({})", pc.chosen, pc.reason);
+    assert_eq!(pc.chosen, "plain");
+    assert!(plain.sigma_exponent.is_none());
+}
+
+#[test]
+fn figures_are_written() {
+    let dir = default_session();
+    let plots: PathBuf = dir.join("plots");
+    solve_with(dir, "fit-plots.json", |o| o.plots = Some(plots.clone()));
+    for name in ["radiance-theta", "residual-theta"] {
+        let png = image::open(plots.join(format!("{name}.png")))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(png.dimensions(), (900, 600));
+        // Not blank: some pixels far from white.
+        assert!(
+            png.pixels()
+                .filter(|p| p.0.iter().any(|&v| v < 128))
+                .count()
+                > 1000
+        );
+        let svg = std::fs::read_to_string(plots.join(format!("{name}.svg"))).unwrap();
+        assert!(svg.contains("r = 35 mm") && svg.contains("θ"), "{name}");
+    }
+}
