@@ -286,7 +286,26 @@ pub fn find_spheres(
             .collect();
         inside.sort_by(|a, b| a.total_cmp(b));
         let level = inside[inside.len() * 9 / 10];
-        let edges = silhouette::edge_points(lum, region, (5.0 * noise).max(0.03 * level), proj);
+        // The sphere's own noise (shot noise grows with the level, so the background's says
+        // little about it): 1.4826 × MAD / √2 of horizontal neighbour differences inside the
+        // blob. A Sobel component of white noise σ has σ·√12/8 ≈ 0.43σ: 2.5σ keeps false edges
+        // inside the sphere below one in a million pixels.
+        let mut diffs: Vec<f64> = (b.bbox[1]..=b.bbox[3])
+            .flat_map(|y| (b.bbox[0]..b.bbox[2]).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                mask[(y * img.width + x) as usize] && mask[(y * img.width + x + 1) as usize]
+            })
+            .map(|(x, y)| (lum.at(x + 1, y) as f64 - lum.at(x, y) as f64).abs())
+            .collect();
+        let inner_noise = if diffs.is_empty() {
+            0.0
+        } else {
+            let k = diffs.len() / 2;
+            diffs.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+            1.4826 * diffs[k] / std::f64::consts::SQRT_2
+        };
+        let threshold = (5.0 * noise).max(2.5 * inner_noise).max(0.03 * level);
+        let edges = silhouette::edge_points(lum, region, threshold, proj);
         let fail = |what: &str| {
             Error::invalid(
                 path,

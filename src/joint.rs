@@ -170,7 +170,8 @@ pub fn light_from_shading(spheres: &[&SphereData], eta: f64) -> Vector3<f64> {
             (g.normal, o.radiance[1] / t)
         })
         .collect();
-    let solve = |use_pt: &dyn Fn(&(Vector3<f64>, f64)) -> bool| -> Option<Vector3<f64>> {
+    type Pick<'a> = &'a dyn Fn(&(Vector3<f64>, f64)) -> bool;
+    let solve = |use_pt: Pick| -> Option<Vector3<f64>> {
         let mut a = nalgebra::Matrix3::<f64>::zeros();
         let mut b = Vector3::zeros();
         for p in pts.iter().filter(|p| use_pt(p)) {
@@ -315,9 +316,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let mut stages = vec![];
     // Stage: diffuse, on 2° cells without the highlight.
     let mut free = [false; N_PARAMS];
-    for k in 0..6 {
-        free[k] = true;
-    }
+    free[..6].fill(true);
     free[idx::AZIMUTH] = true;
     free[idx::ELEVATION] = true;
     let mut downweighted = 0;
@@ -627,8 +626,8 @@ pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> 
             let m = model.radiance(p, &o.geometry);
             let lit = o.geometry.normal.dot(&l) > 0.0;
             let mut a = [0.0; 6];
-            for c in 0..3 {
-                let (d2, o2) = ((m[c] - o.radiance[c]).powi(2), o.radiance[c].powi(2));
+            for (mc, oc) in m.iter().zip(&o.radiance) {
+                let (d2, o2) = ((mc - oc).powi(2), oc.powi(2));
                 let k = if lit { 0 } else { 2 };
                 a[k] += d2;
                 a[k + 1] += o2;

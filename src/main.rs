@@ -729,7 +729,7 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
     o.robust = !a.no_robust;
     o.extensions = a.extensions;
     if let Some(s) = a.start_sigma0 {
-        if s.iter().any(|v| !(*v > 0.0)) {
+        if s.iter().any(|v| v.is_nan() || *v <= 0.0) {
             bail!("--start-sigma0 must be positive");
         }
     }

@@ -1,11 +1,14 @@
 //! From a session and its detections to the solver's observations: decode every photo, take the
 //! pixels of every detected sphere ([`crate::samples`]), leave out the saturated ones and those
-//! that straddle the silhouette, and weight each channel by 1/σ of the sphere's pixel noise.
+//! that straddle the silhouette, and weight each pixel's channel by 1/σ of its noise.
 //!
-//! The noise is measured, not assumed: half the spread (1.4826 × MAD / √2) of the differences of
-//! horizontally adjacent unflagged pixels of the sphere, per channel. The shading changes little
-//! from one pixel to the next, so these differences are noise; the median ignores the few that
-//! cross the highlight.
+//! The noise is measured, not assumed: per sphere and channel, a shot-plus-read model
+//! σ²(L) = a + b·L fitted to the differences of horizontally adjacent unflagged pixels (the
+//! shading changes little from one pixel to the next, so these differences are noise): the pairs
+//! are binned by level, each bin's variance is (1.4826 × MAD)² / 2 (robust to the few pairs that
+//! cross an edge), and a, b come from a weighted line fit over the bins. A pixel's σ is the model
+//! at the mean level of its two row neighbours (its own value would favour pixels whose noise
+//! happened to be negative).
 //!
 //! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
 //! pixels away from the spheres ([`background`]) and subtracted from every sample.
@@ -38,8 +41,10 @@ pub struct SphereData {
     pub pixels: usize,
     pub saturated: usize,
     pub edge: usize,
-    /// Noise σ per channel (radiance units).
+    /// Noise σ per channel at the sphere's median level (radiance units).
     pub noise: [f64; 3],
+    /// The noise model per channel: σ² = a + b·L.
+    pub noise_model: [[f64; 2]; 3],
     /// The photo's dark floor subtracted from the radiance (`None`: not measurable).
     pub floor: Option<[f64; 3]>,
 }
@@ -84,8 +89,8 @@ pub fn background(img: &crate::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[
                 continue;
             }
             let i = 3 * (y * w + x);
-            for c in 0..3 {
-                ch[c].push(img.data[i + c]);
+            for (c, v) in ch.iter_mut().enumerate() {
+                v.push(img.data[i + c]);
             }
         }
     }
@@ -98,24 +103,68 @@ pub fn background(img: &crate::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[
     }))
 }
 
-/// Noise per channel from adjacent-pixel differences (see the module docs).
-pub fn pixel_noise(s: &[Sample]) -> [f64; 3] {
+/// The noise model σ² = a + b·L per channel from adjacent-pixel differences (see the module
+/// docs); `floor` is the smallest σ allowed (a quantisation step). Without enough pairs: a
+/// constant.
+pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
     let skip = samples::SATURATED | samples::EDGE | samples::HIGHLIGHT;
-    let mut diffs: [Vec<f64>; 3] = Default::default();
+    let mut pairs: [Vec<(f64, f64)>; 3] = Default::default();
     for w in s.windows(2) {
         let (a, b) = (&w[0], &w[1]);
         if b.px[1] == a.px[1] && b.px[0] == a.px[0] + 1 && (a.flags | b.flags) & skip == 0 {
-            for c in 0..3 {
-                diffs[c].push((a.radiance[c] - b.radiance[c]).abs());
+            for (c, p) in pairs.iter_mut().enumerate() {
+                p.push((
+                    0.5 * (a.radiance[c] + b.radiance[c]),
+                    (a.radiance[c] - b.radiance[c]).abs(),
+                ));
             }
         }
     }
-    diffs.map(|mut d| {
-        if d.is_empty() {
-            return f64::NAN;
-        }
+    let f2 = floor * floor;
+    let robust_var = |d: &mut Vec<f64>| {
         d.sort_by(|a, b| a.total_cmp(b));
-        1.4826 * d[d.len() / 2] / std::f64::consts::SQRT_2
+        let sd = 1.4826 * d[d.len() / 2] / std::f64::consts::SQRT_2;
+        (sd * sd).max(f2)
+    };
+    pairs.map(|mut p| {
+        const BINS: usize = 12;
+        if p.is_empty() {
+            return [f2, 0.0];
+        }
+        if p.len() < 20 * BINS {
+            let mut d: Vec<f64> = p.iter().map(|x| x.1).collect();
+            return [robust_var(&mut d), 0.0];
+        }
+        p.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Per bin: mean level, variance, and the variance's weight (count / var²).
+        let mut pts = vec![];
+        for chunk in p.chunks(p.len().div_ceil(BINS)) {
+            let level = chunk.iter().map(|x| x.0).sum::<f64>() / chunk.len() as f64;
+            let mut d: Vec<f64> = chunk.iter().map(|x| x.1).collect();
+            let var = robust_var(&mut d);
+            pts.push((level, var, chunk.len() as f64 / (var * var)));
+        }
+        // Weighted least squares of var = a + b·level.
+        let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(x, y, w) in &pts {
+            sw += w;
+            sx += w * x;
+            sy += w * y;
+            sxx += w * x * x;
+            sxy += w * x * y;
+        }
+        let det = sw * sxx - sx * sx;
+        let (a, b) = if det > 0.0 {
+            ((sy * sxx - sx * sxy) / det, (sw * sxy - sx * sy) / det)
+        } else {
+            (sy / sw, 0.0)
+        };
+        if b < 0.0 || !b.is_finite() {
+            // No shot noise visible: a constant.
+            [(sy / sw).max(f2), 0.0]
+        } else {
+            [a.max(f2), b]
+        }
     })
 }
 
@@ -188,15 +237,21 @@ pub fn observe(
             let floor_rgb = floors[i].unwrap_or([0.0; 3]);
             let mut smp = smp;
             for x in smp.iter_mut() {
-                for c in 0..3 {
-                    x.radiance[c] -= floor_rgb[c];
+                for (v, f) in x.radiance.iter_mut().zip(&floor_rgb) {
+                    *v -= f;
                 }
             }
-            let noise = pixel_noise(&smp);
-            // A sphere without measurable noise (a noise-free render): one level unit.
+            // The smallest σ: half a level step (a noise-free render).
             let floor =
                 0.5 / ((1u32 << images[i].bits.min(16)) as f64) / info.exposure.unwrap_or(1.0);
-            let noise = noise.map(|n| if n.is_finite() && n > floor { n } else { floor });
+            let model = noise_model(&smp, floor);
+            let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
+            let noise = {
+                let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
+                lv.sort_by(|a, b| a.total_cmp(b));
+                let med = lv.get(lv.len() / 2).copied().unwrap_or(0.0);
+                [0, 1, 2].map(|c| sigma(c, med))
+            };
             let mut out = SphereData {
                 image: info.file.clone(),
                 index: j,
@@ -208,9 +263,10 @@ pub fn observe(
                 saturated: 0,
                 edge: 0,
                 noise,
+                noise_model: model,
                 floor: floors[i],
             };
-            for x in &smp {
+            for (k, x) in smp.iter().enumerate() {
                 if x.flags & samples::SATURATED != 0 {
                     out.saturated += 1;
                     continue;
@@ -219,6 +275,20 @@ pub fn observe(
                     out.edge += 1;
                     continue;
                 }
+                // The level of the pixel's row neighbours (not its own value: a weight that
+                // depends on the pixel's own noise biases the fit toward its low values).
+                let mut level = [0.0; 3];
+                let mut n = 0.0;
+                for nb in [k.wrapping_sub(1), k + 1] {
+                    if let Some(y) = smp.get(nb) {
+                        if y.px[1] == x.px[1] && y.px[0].abs_diff(x.px[0]) == 1 {
+                            for (l, v) in level.iter_mut().zip(&y.radiance) {
+                                *l += v;
+                            }
+                            n += 1.0;
+                        }
+                    }
+                }
                 out.obs.push(Obs {
                     geometry: Geometry {
                         normal: x.normal,
@@ -226,7 +296,9 @@ pub fn observe(
                         radius_mm: s.radius_mm,
                     },
                     radiance: x.radiance,
-                    weight: noise.map(|n| 1.0 / n),
+                    weight: [0, 1, 2].map(|c| {
+                        1.0 / sigma(c, if n > 0.0 { level[c] / n } else { x.radiance[c] })
+                    }),
                 });
                 out.highlight.push(x.flags & samples::HIGHLIGHT != 0);
                 out.theta.push(x.theta);

@@ -156,9 +156,7 @@ pub fn fit(
             light: angles,
         };
         let mut free = [false; N_PARAMS];
-        for k in 0..6 {
-            free[k] = true;
-        }
+        free[..6].fill(true);
         let f = solver::fit(model, &obs, &start, free, &[]);
         converged &= f.converged;
         let m = &f.params.material;

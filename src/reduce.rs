@@ -8,8 +8,8 @@
 //! are unions of fine ones (the bins nest exactly), so every reduction level costs one pass over
 //! the pixels. A cell becomes one observation: the mean radiance, a virtual pixel at exactly the
 //! cell's mean (θ, φ) (the view of its representative member, and the normal with those two
-//! angles on that member's side), and channel weights × √n (the mean of n pixels has 1/√n of
-//! their noise). Pixels near the mirror configuration (the specular highlight, where the lobe
+//! angles on that member's side), and channel weights n / √(Σσᵢ²) (the noise of the mean of
+//! the members' values). Pixels near the mirror configuration (the specular highlight, where the lobe
 //! changes by its whole height across a cell) are kept as they are.
 //!
 //! The price of a cell is the model's curvature inside it: to second order the mean of the model
@@ -37,6 +37,8 @@ pub struct Cell {
     pub key: (i64, i64, bool),
     pub n: f64,
     pub sum: [f64; 3],
+    /// Σσ² of the members' noise per channel (σ = 1/weight; 0 weight: left out).
+    pub sum_var: [f64; 3],
     /// Σθ, Σφ, Σθ², Σφ², Σθφ.
     pub moments: [f64; 5],
     /// The member nearest the cell centre, and its squared angular distance to it.
@@ -64,6 +66,7 @@ impl Cell {
         self.n += o.n;
         for c in 0..3 {
             self.sum[c] += o.sum[c];
+            self.sum_var[c] += o.sum_var[c];
         }
         for k in 0..5 {
             self.moments[k] += o.moments[k];
@@ -107,7 +110,7 @@ impl Pooled {
         }
     }
 
-    /// Add one sphere's pixels (all with the same channel weights).
+    /// Add one sphere's pixels.
     pub fn add_sphere(&mut self, sphere: usize, obs: &[Obs]) {
         let mut map: HashMap<(i64, i64, bool), Cell> = HashMap::new();
         let w = BASE_WIDTH;
@@ -128,6 +131,7 @@ impl Pooled {
                 key,
                 n: 0.0,
                 sum: [0.0; 3],
+                sum_var: [0.0; 3],
                 moments: [0.0; 5],
                 rep: *o,
                 rep_d2: f64::INFINITY,
@@ -135,6 +139,11 @@ impl Pooled {
             c.n += 1.0;
             for k in 0..3 {
                 c.sum[k] += o.radiance[k];
+                c.sum_var[k] += if o.weight[k] > 0.0 {
+                    (o.weight[k] * o.weight[k]).recip()
+                } else {
+                    f64::INFINITY
+                };
             }
             let m = &mut c.moments;
             m[0] += t;
@@ -190,7 +199,14 @@ impl Pooled {
         Obs {
             geometry,
             radiance: c.sum.map(|s| s / c.n),
-            weight: c.rep.weight.map(|w| w * c.n.sqrt()),
+            // The mean of n pixels of variances σᵢ²: variance Σσᵢ² / n².
+            weight: c.sum_var.map(|v| {
+                if v.is_finite() && v > 0.0 {
+                    c.n / v.sqrt()
+                } else {
+                    0.0
+                }
+            }),
         }
     }
 

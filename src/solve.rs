@@ -618,10 +618,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             } else {
                 format!("pixels: all {} used", jf.pixels)
             });
-            for k in 0..N_PARAMS {
-                if jf.status[k].starts_with("prior") {
-                    l.skipped
-                        .push(format!("{}: {}", PARAM_NAMES[k], jf.status[k]));
+            for (name, st) in PARAM_NAMES.iter().zip(&jf.status) {
+                if st.starts_with("prior") {
+                    l.skipped.push(format!("{name}: {st}"));
                 }
             }
             Outcome {
