@@ -172,14 +172,22 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
                         l.highlight_radius.unwrap_or(0.0),
                     );
                     for (i, s) in sp.iter().enumerate() {
-                        pl.add_sphere(i, &s.obs);
+                        pl.add_sphere(i, &s.obs, Some(&s.px));
                     }
                     pl
                 };
-                format!(
-                    "{:.2}",
-                    pooled.shift(&pooled.merged(f), &jf.model, &all.fit.params, all.fit.free)
-                )
+                format!("{:.2}", {
+                    let hl = pooled.highlight_cells(jf.chosen.highlight_block_px);
+                    pooled
+                        .shift(
+                            &pooled.merged(f),
+                            &hl,
+                            &jf.model,
+                            &all.fit.params,
+                            all.fit.free,
+                        )
+                        .max_std
+                })
             } else {
                 "—".into()
             },

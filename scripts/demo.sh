@@ -18,3 +18,5 @@ else
 fi
 "$wb" check datasets/demo
 "$wb" detect datasets/demo
+# The joint fit: reuses detections.json (newer than its inputs) and the calibration.
+"$wb" solve --joint datasets/demo --plots datasets/demo/plots

@@ -7,8 +7,12 @@
 //!    solved in closed form at each grid point; α from the detector's lobe fit; ks by linear least
 //!    squares on the highlight pixels;
 //! 2. the diffuse fit (σ0, albedo, light) on 2° cells without the highlight pixels;
-//! 3. the choice of reduction level ([`crate::reduce`]): the coarsest whose predicted parameter
-//!    shift stays below [`SHIFT_LIMIT`] standard errors;
+//! 3. the choice of reduction level ([`crate::reduce`]): the coarsest (θ, φ) cells whose predicted
+//!    parameter shifts all stay below [`SHIFT_LIMIT`] standard errors or below a fixed tolerance
+//!    ([`crate::reduce::tolerance`]: 0.1% of σ0, albedo, α; 1% of ks; 0.002 of η; 0.005° of
+//!    light),
+//!    then, by the
+//!    same test, the largest pixel blocks for the highlight;
 //! 4. the full fit with the Huber loss on the chosen cells and the highlight pixels;
 //! 5. identifiability: parameters whose standard error is not finite or larger than their
 //!    plausible range are held at their prior (η, α), or switched off (ks, the extensions), and
@@ -18,13 +22,18 @@ use crate::cdrf;
 use crate::fresnel;
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use crate::observe::SphereData;
-use crate::reduce::{Pooled, FACTORS};
+use crate::reduce::Pooled;
 use crate::solver::{self, Fit, Obs, Prior};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-/// Largest predicted shift of any parameter that a reduction level may cause (in standard errors).
-pub const SHIFT_LIMIT: f64 = 0.3;
+/// Largest predicted shift of any parameter that a reduction level may cause (in standard errors;
+/// or below the parameter's [`crate::reduce::tolerance`]).
+pub const SHIFT_LIMIT: f64 = crate::reduce::SHIFT_STD;
+/// The highlight region pooled in pixel blocks, in detector highlight radii.
+pub const HIGHLIGHT_KEEP: f64 = 1.0;
+/// Block sizes (pixels) tried for the highlight, largest first.
+pub const HIGHLIGHT_BLOCKS: [u32; 4] = [16, 8, 4, 2];
 /// Huber threshold (in robust σ of the residuals).
 pub const HUBER_K: f64 = 1.345;
 /// Default prior on η (a typical wax, soap or resin).
@@ -35,7 +44,7 @@ pub const ALPHA_PRIOR: f64 = 0.1;
 /// How many residuals the solver sees.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Reduction {
-    /// The coarsest level whose predicted shift stays below [`SHIFT_LIMIT`].
+    /// The coarsest level whose predicted shifts stay below [`SHIFT_LIMIT`] std or tolerance.
     Auto,
     /// Every pixel.
     None,
@@ -131,9 +140,16 @@ impl Stage {
 pub struct Level {
     /// Cell width (degrees; 0 = every pixel).
     pub width_deg: f64,
+    /// Highlight pixels pooled in blocks of this many pixels square (1: one by one).
+    pub highlight_block_px: u32,
     pub observations: usize,
     /// Predicted largest parameter shift, in standard errors.
     pub predicted_shift_std: f64,
+    /// Every parameter's predicted shift is below [`SHIFT_LIMIT`] standard errors or below its
+    /// tolerance ([`crate::reduce::tolerance`]).
+    pub within_tolerance: bool,
+    /// The parameter whose predicted shift is largest against what is accepted for it.
+    pub limiting: Option<String>,
 }
 
 /// What [`fit_joint`] returns.
@@ -153,6 +169,8 @@ pub struct JointFit {
     pub status: [String; N_PARAMS],
     /// Whether a specular lobe was fitted.
     pub specular: bool,
+    /// Seconds spent in each phase (pooling, start values, stages, reduction choice).
+    pub phases: Vec<(String, f64)>,
 }
 
 /// The light from the shading alone (a start value when no highlight was found). Where the
@@ -275,19 +293,28 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let light0 = setup
         .light
         .unwrap_or_else(|| light_from_shading(spheres, setup.eta_prior.0));
+    // Pixels pooled with the highlight (in pixel blocks, not (θ, φ) cells): within the detector's
+    // highlight radius (twice that was measured to gain nothing and cost 4× the pixels).
     let keep = if highlight {
-        setup.highlight_radius.unwrap_or(0.0)
+        HIGHLIGHT_KEEP * setup.highlight_radius.unwrap_or(0.0)
     } else {
         0.0
     };
     let pool = |light: Vector3<f64>| {
-        let mut p = Pooled::new(light, keep);
-        for (k, s) in spheres.iter().enumerate() {
-            p.add_sphere(k, &s.obs);
-        }
-        p
+        let parts: Vec<crate::reduce::SphereObs> = spheres
+            .iter()
+            .map(|s| (&s.obs[..], Some(&s.px[..])))
+            .collect();
+        Pooled::of_spheres(light, keep, &parts)
+    };
+    let mut phases: Vec<(String, f64)> = vec![];
+    let mut clock = std::time::Instant::now();
+    let mut lap = |name: &str, phases: &mut Vec<(String, f64)>| {
+        phases.push((name.to_string(), clock.elapsed().as_secs_f64()));
+        clock = std::time::Instant::now();
     };
     let mut pooled = pool(light0);
+    lap("pool", &mut phases);
     let start_light = setup
         .start_light
         .unwrap_or_else(|| LightAngles::from_direction(&light0));
@@ -296,9 +323,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         ([1.0; 3], [1.0; 3])
     } else {
         let coarse = pooled.observations(&pooled.merged(16));
-        let coarse = &coarse[..coarse.len() - pooled.kept.len()];
-        diffuse_start(&model, coarse, &start_light, eta_mean, setup.start_sigma0)
+        diffuse_start(&model, &coarse, &start_light, eta_mean, setup.start_sigma0)
     };
+    lap("start values", &mut phases);
     let mut p = Params {
         material: crate::model::Material {
             sigma0_mm: s0,
@@ -326,7 +353,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     for round in 0..if setup.warm.is_some() { 0 } else { 2 } {
         let t = std::time::Instant::now();
         let cells = pooled.merged(8);
-        let obs: Vec<Obs> = pooled.observations(&cells)[..cells.len()].to_vec();
+        let obs: Vec<Obs> = pooled.observations(&cells);
         let (f, _, _) = solver::fit_robust(model, &obs, &p, free, &[], HUBER_K, 4);
         stages.push(Stage::of(
             "diffuse (2° cells, highlight left out)",
@@ -347,6 +374,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             break;
         }
     }
+    lap("diffuse stage", &mut phases);
     // Specular start.
     let mut specular = highlight && !pooled.kept.is_empty();
     if specular && setup.warm.is_none() {
@@ -419,46 +447,84 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         }
     }
     // Reduction level.
+    lap("specular start", &mut phases);
     let mut levels = vec![];
     let raw: Vec<Obs> = spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect();
-    let chosen_factor = match setup.reduction {
-        Reduction::None => None,
-        Reduction::Factor(f) => Some(f),
+    // Angular cells first (the highlight pixel by pixel), then the highlight's pixel blocks.
+    let (chosen_factor, block) = match setup.reduction {
+        Reduction::None => (None, 1),
+        Reduction::Factor(f) => (Some(f), 1),
         Reduction::Auto => {
+            let single = pooled.highlight_cells(1);
+            let pyramid = pooled.pyramid();
             let mut pick = None;
-            for &f in FACTORS.iter().rev() {
-                let cells = pooled.merged(f);
-                let shift = pooled.shift(&cells, &model, &p, free);
+            for (f, cells) in pyramid.iter().rev() {
+                let f = *f;
+                let shift = pooled.shift(cells, &single, &model, &p, free);
                 levels.push(Level {
                     width_deg: f as f64 * 0.25,
-                    observations: cells.len() + pooled.kept.len(),
-                    predicted_shift_std: shift,
+                    highlight_block_px: 1,
+                    observations: cells.len() + single.len(),
+                    predicted_shift_std: shift.max_std,
+                    within_tolerance: shift.within_tolerance,
+                    limiting: shift.limiting().map(|k| PARAM_NAMES[k].to_string()),
                 });
-                if shift <= SHIFT_LIMIT {
+                if shift.within_tolerance {
                     pick = Some(f);
                     break;
                 }
             }
-            pick
+            let mut block = 1;
+            if let Some(f) = pick {
+                let angular = &pyramid.iter().find(|l| l.0 == f).expect("a level").1;
+                for b in HIGHLIGHT_BLOCKS {
+                    if pooled.kept.len() < 4 * (b * b) as usize {
+                        continue;
+                    }
+                    let hl = pooled.highlight_cells(b);
+                    let shift = pooled.shift(angular, &hl, &model, &p, free);
+                    levels.push(Level {
+                        width_deg: f as f64 * 0.25,
+                        highlight_block_px: b,
+                        observations: angular.len() + hl.len(),
+                        predicted_shift_std: shift.max_std,
+                        within_tolerance: shift.within_tolerance,
+                        limiting: shift.limiting().map(|k| PARAM_NAMES[k].to_string()),
+                    });
+                    if shift.within_tolerance {
+                        block = b;
+                        break;
+                    }
+                }
+            }
+            (pick, block)
         }
     };
     let final_obs = match chosen_factor {
-        Some(f) => pooled.observations(&pooled.merged(f)),
+        Some(f) => {
+            let mut cells = pooled.merged(f);
+            cells.extend(pooled.highlight_cells(block));
+            pooled.observations(&cells)
+        }
         None => raw,
     };
+    let tried = levels.iter().find(|l| {
+        Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25) && l.highlight_block_px == block
+    });
     let chosen = Level {
         width_deg: chosen_factor.map_or(0.0, |f| f as f64 * 0.25),
+        highlight_block_px: block,
         observations: final_obs.len(),
-        predicted_shift_std: levels
-            .iter()
-            .find(|l| Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25))
-            .map_or(0.0, |l| l.predicted_shift_std),
+        predicted_shift_std: tried.map_or(0.0, |l| l.predicted_shift_std),
+        within_tolerance: tried.is_none_or(|l| l.within_tolerance),
+        limiting: tried.and_then(|l| l.limiting.clone()),
     };
     if chosen_factor.is_none() && setup.reduction == Reduction::Auto {
         notes.push(format!(
-            "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std: every pixel used"
+            "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std or its tolerance: every pixel used"
         ));
     }
+    lap("reduction choice", &mut phases);
     // Full fit, then identifiability.
     let mut fit = None;
     for attempt in 0..3 {
@@ -569,7 +635,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             status[k] = "fixed".into();
         }
     }
+    lap("joint stage", &mut phases);
     JointFit {
+        phases,
         fit,
         model,
         stages,
@@ -636,10 +704,12 @@ pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> 
             }
             (a, 1usize)
         })
-        .reduce(
-            || ([0.0; 6], 0),
-            |(a, n), (b, m)| (std::array::from_fn(|i| a[i] + b[i]), n + m),
-        );
+        .collect::<Vec<_>>()
+        .into_iter()
+        // In pixel order: the same result on every run.
+        .fold(([0.0; 6], 0), |(a, n), (b, m)| {
+            (std::array::from_fn(|i| a[i] + b[i]), n + m)
+        });
     let (a, n) = sums;
     let rel = |d: f64, o: f64| if o > 0.0 { (d / o).sqrt() } else { f64::NAN };
     Prediction {

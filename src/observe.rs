@@ -33,6 +33,8 @@ pub struct SphereData {
     pub index: usize,
     pub radius_mm: f64,
     pub obs: Vec<Obs>,
+    /// Per observation: its pixel.
+    pub px: Vec<[u32; 2]>,
     /// Per observation: inside the highlight (flag of [`crate::samples`]).
     pub highlight: Vec<bool>,
     /// Per observation: angle between normal and the detected light (radians).
@@ -257,6 +259,7 @@ pub fn observe(
                 index: j,
                 radius_mm: s.radius_mm,
                 obs: vec![],
+                px: vec![],
                 highlight: vec![],
                 theta: vec![],
                 pixels: smp.len(),
@@ -300,6 +303,7 @@ pub fn observe(
                         1.0 / sigma(c, if n > 0.0 { level[c] / n } else { x.radiance[c] })
                     }),
                 });
+                out.px.push(x.px);
                 out.highlight.push(x.flags & samples::HIGHLIGHT != 0);
                 out.theta.push(x.theta);
             }

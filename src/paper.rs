@@ -137,7 +137,7 @@ pub fn fit(
                 })
                 .collect();
             pixels += obs.len();
-            pooled.add_sphere(k, &obs);
+            pooled.add_sphere(k, &obs, None);
         }
         let obs = pooled.observations(&pooled.merged(FACTOR));
         let (s0, a0) = crate::joint::diffuse_start(&model, &obs, &angles, eta, None);

@@ -10,19 +10,20 @@
 //! cell's mean (θ, φ) (the view of its representative member, and the normal with those two
 //! angles on that member's side), and channel weights n / √(Σσᵢ²) (the noise of the mean of
 //! the members' values). Pixels near the mirror configuration (the specular highlight, where the lobe
-//! changes by its whole height across a cell) are kept as they are.
+//! changes by its whole height across a cell, and the (θ, φ) map is singular at the mirror point)
+//! are pooled apart, in square blocks of pixels ([`Pooled::highlight_cells`]), which are as
+//! smooth there as anywhere.
 //!
 //! The price of a cell is the model's curvature inside it: to second order the mean of the model
 //! over a cell differs from the model at its mean (θ, φ) by ½ tr(H C) (H: the model's Hessian in
 //! (θ, φ), C: the covariance of the members' angles). [`Pooled::shift`] turns those biases into
-//! the parameter shift they cause, (JᵀJ)⁻¹ Jᵀ b, in units of each parameter's standard error:
-//! that is how the solver chooses a level.
+//! the parameter shift they cause, (JᵀJ)⁻¹ Jᵀ b, against each parameter's standard error and a
+//! fixed tolerance: that is how the solver chooses a level.
 
 use crate::model::{Geometry, Model, Params, N_PARAMS};
 use crate::solver::Obs;
 use nalgebra::{DMatrix, DVector, Vector3};
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// Width of the fine cells (radians): 0.25°.
 pub const BASE_WIDTH: f64 = 0.25 * std::f64::consts::PI / 180.0;
@@ -41,9 +42,28 @@ pub struct Cell {
     pub sum_var: [f64; 3],
     /// Σθ, Σφ, Σθ², Σφ², Σθφ.
     pub moments: [f64; 5],
+    /// Σn and Σnnᵀ (xx, yy, zz, xy, xz, yz) of the members' normals.
+    pub normals: [f64; 9],
+    /// A block of pixels (the highlight), not a (θ, φ) cell: its virtual pixel has the members'
+    /// mean normal, and its curvature is taken in the tangent plane there.
+    pub spatial: bool,
     /// The member nearest the cell centre, and its squared angular distance to it.
     pub rep: Obs,
     rep_d2: f64,
+}
+
+fn normal_moments(n: &Vector3<f64>) -> [f64; 9] {
+    [
+        n.x,
+        n.y,
+        n.z,
+        n.x * n.x,
+        n.y * n.y,
+        n.z * n.z,
+        n.x * n.y,
+        n.x * n.z,
+        n.y * n.z,
+    ]
 }
 
 impl Cell {
@@ -71,12 +91,18 @@ impl Cell {
         for k in 0..5 {
             self.moments[k] += o.moments[k];
         }
+        for k in 0..9 {
+            self.normals[k] += o.normals[k];
+        }
         if o.rep_d2 < self.rep_d2 {
             self.rep = o.rep;
             self.rep_d2 = o.rep_d2;
         }
     }
 }
+
+/// One sphere's observations and, when known, their pixel positions.
+pub type SphereObs<'a> = (&'a [Obs], Option<&'a [[u32; 2]]>);
 
 /// Pixels pooled in fine cells, with the highlight pixels kept apart.
 #[derive(Clone, Debug)]
@@ -85,7 +111,10 @@ pub struct Pooled {
     /// Pixels within this angle (radians) of the mirror configuration are kept as they are.
     pub keep: f64,
     pub cells: Vec<Cell>,
+    /// The highlight pixels, as observations and as one-pixel cells (with their pixel position
+    /// when known), for [`Pooled::highlight_cells`].
     pub kept: Vec<Obs>,
+    kept_cells: Vec<(Cell, Option<[u32; 2]>)>,
     /// Pixels added.
     pub pixels: usize,
 }
@@ -106,59 +135,118 @@ impl Pooled {
             keep,
             cells: vec![],
             kept: vec![],
+            kept_cells: vec![],
             pixels: 0,
         }
     }
 
-    /// Add one sphere's pixels.
-    pub fn add_sphere(&mut self, sphere: usize, obs: &[Obs]) {
-        let mut map: HashMap<(i64, i64, bool), Cell> = HashMap::new();
+    /// Add one sphere's pixels (with their pixel positions, when known: the highlight is then
+    /// pooled in square blocks of pixels by [`Pooled::highlight_cells`]).
+    pub fn add_sphere(&mut self, sphere: usize, obs: &[Obs], px: Option<&[[u32; 2]]>) {
         let w = BASE_WIDTH;
-        for o in obs {
-            self.pixels += 1;
-            let g = &o.geometry;
-            let h = (self.light + g.view).normalize();
-            if g.normal.dot(&h).clamp(-1.0, 1.0).acos() < self.keep {
-                self.kept.push(*o);
-                continue;
-            }
-            let (t, p, side) = angles(g, &self.light);
-            let key = ((t / w).floor() as i64, (p / w).floor() as i64, side);
-            let d2 =
-                (t - (key.0 as f64 + 0.5) * w).powi(2) + (p - (key.1 as f64 + 0.5) * w).powi(2);
-            let c = map.entry(key).or_insert(Cell {
-                sphere,
-                key,
-                n: 0.0,
-                sum: [0.0; 3],
-                sum_var: [0.0; 3],
-                moments: [0.0; 5],
-                rep: *o,
-                rep_d2: f64::INFINITY,
-            });
-            c.n += 1.0;
-            for k in 0..3 {
-                c.sum[k] += o.radiance[k];
-                c.sum_var[k] += if o.weight[k] > 0.0 {
-                    (o.weight[k] * o.weight[k]).recip()
+        self.pixels += obs.len();
+        let single = |o: &Obs, key: (i64, i64, bool), t: f64, p: f64, kept: bool, d2: f64| Cell {
+            sphere,
+            key,
+            n: 1.0,
+            sum: o.radiance,
+            sum_var: o.weight.map(|w| {
+                if w > 0.0 {
+                    (w * w).recip()
                 } else {
                     f64::INFINITY
-                };
-            }
-            let m = &mut c.moments;
-            m[0] += t;
-            m[1] += p;
-            m[2] += t * t;
-            m[3] += p * p;
-            m[4] += t * p;
-            if d2 < c.rep_d2 {
-                c.rep = *o;
-                c.rep_d2 = d2;
+                }
+            }),
+            moments: [t, p, t * t, p * p, t * p],
+            normals: normal_moments(&o.geometry.normal),
+            spatial: kept,
+            rep: *o,
+            rep_d2: d2,
+        };
+        // Per pixel, in parallel: its angles and cell (None: a highlight pixel); then the pixels
+        // in cell order, accumulated run by run.
+        type Keyed = (Option<(i64, i64, bool)>, f64, f64, bool);
+        let keyed: Vec<Keyed> = obs
+            .par_iter()
+            .map(|o| {
+                let g = &o.geometry;
+                let h = (self.light + g.view).normalize();
+                let (t, p, side) = angles(g, &self.light);
+                if g.normal.dot(&h).clamp(-1.0, 1.0).acos() < self.keep {
+                    (None, t, p, side)
+                } else {
+                    (
+                        Some(((t / w).floor() as i64, (p / w).floor() as i64, side)),
+                        t,
+                        p,
+                        side,
+                    )
+                }
+            })
+            .collect();
+        let mut order: Vec<((i64, i64, bool), u32)> = keyed
+            .iter()
+            .enumerate()
+            .filter_map(|(i, k)| k.0.map(|key| (key, i as u32)))
+            .collect();
+        order.par_sort_unstable();
+        for (i, k) in keyed.iter().enumerate() {
+            if k.0.is_none() {
+                let o = &obs[i];
+                self.kept.push(*o);
+                self.kept_cells.push((
+                    single(o, (0, 0, k.3), k.1, k.2, true, 0.0),
+                    px.map(|v| v[i]),
+                ));
             }
         }
-        let mut cells: Vec<Cell> = map.into_values().collect();
-        cells.sort_by_key(|c| c.key);
+        let mut cells: Vec<Cell> = vec![];
+        for (key, i) in order {
+            let (o, (_, t, p, _)) = (&obs[i as usize], keyed[i as usize]);
+            let d2 =
+                (t - (key.0 as f64 + 0.5) * w).powi(2) + (p - (key.1 as f64 + 0.5) * w).powi(2);
+            let c = single(o, key, t, p, false, d2);
+            match cells.last_mut() {
+                Some(last) if last.key == key => last.absorb(&c),
+                _ => cells.push(c),
+            }
+        }
         self.cells.extend(cells);
+    }
+
+    /// Pool the spheres' pixels (sphere k: `obs[k]`, with its pixel positions) in parallel.
+    pub fn of_spheres(light: Vector3<f64>, keep: f64, spheres: &[SphereObs]) -> Pooled {
+        let parts: Vec<Pooled> = spheres
+            .par_iter()
+            .enumerate()
+            .map(|(k, (obs, px))| {
+                let mut p = Pooled::new(light, keep);
+                p.add_sphere(k, obs, *px);
+                p
+            })
+            .collect();
+        let mut out = Pooled::new(light, keep);
+        for p in parts {
+            out.pixels += p.pixels;
+            out.cells.extend(p.cells);
+            out.kept.extend(p.kept);
+            out.kept_cells.extend(p.kept_cells);
+        }
+        out
+    }
+
+    /// The cells at every level of [`FACTORS`], each merged from the next finer one.
+    pub fn pyramid(&self) -> Vec<(u32, Vec<Cell>)> {
+        let mut out: Vec<(u32, Vec<Cell>)> = vec![(1, self.cells.clone())];
+        for &f in &FACTORS[1..] {
+            let (pf, prev) = out.last().expect("a level");
+            let r = (f / pf) as i64;
+            let next = group(prev, |c| {
+                (c.key.0.div_euclid(r), c.key.1.div_euclid(r), c.key.2)
+            });
+            out.push((f, next));
+        }
+        out
     }
 
     /// The cells at `factor` × [`BASE_WIDTH`].
@@ -167,30 +255,49 @@ impl Pooled {
             return self.cells.clone();
         }
         let f = factor as i64;
-        let mut map: HashMap<(usize, (i64, i64, bool)), Cell> = HashMap::new();
-        for c in &self.cells {
-            let key = (c.key.0.div_euclid(f), c.key.1.div_euclid(f), c.key.2);
-            map.entry((c.sphere, key))
-                .and_modify(|m| m.absorb(c))
-                .or_insert(Cell { key, ..*c });
+        group(&self.cells, |c| {
+            (c.key.0.div_euclid(f), c.key.1.div_euclid(f), c.key.2)
+        })
+    }
+
+    /// The highlight pixels pooled in `block` × `block` pixel squares per sphere and side of the
+    /// light–view plane (1: one cell a pixel). Pixels without a known position stay single.
+    pub fn highlight_cells(&self, block: u32) -> Vec<Cell> {
+        if block <= 1 {
+            return self.kept_cells.iter().map(|(c, _)| *c).collect();
         }
-        let mut v: Vec<Cell> = map.into_values().collect();
-        v.sort_by_key(|c| (c.sphere, c.key));
+        let b = block as i64;
+        let mut blocks = vec![];
+        let mut single = vec![];
+        for (c, px) in &self.kept_cells {
+            match px {
+                Some([x, y]) => blocks.push(Cell {
+                    key: (*x as i64 / b, *y as i64 / b, c.key.2),
+                    ..*c
+                }),
+                None => single.push(*c),
+            }
+        }
+        let mut v = group(&blocks, |c| c.key);
+        v.extend(single);
         v
     }
 
-    /// One observation per cell (and the kept pixels).
+    /// One observation per cell.
     pub fn observations(&self, cells: &[Cell]) -> Vec<Obs> {
-        let mut out: Vec<Obs> = cells.iter().map(|c| self.virtual_obs(c)).collect();
-        out.extend_from_slice(&self.kept);
-        out
+        cells.iter().map(|c| self.virtual_obs(c)).collect()
     }
 
     fn virtual_obs(&self, c: &Cell) -> Obs {
         let (mt, mp) = c.mean();
         let mut geometry = c.rep.geometry;
         if c.n > 1.0 {
-            if let Some(n) =
+            if c.spatial {
+                let m = Vector3::new(c.normals[0], c.normals[1], c.normals[2]);
+                if m.norm() > 0.0 {
+                    geometry.normal = m.normalize();
+                }
+            } else if let Some(n) =
                 normal_with_angles(&geometry.view, &self.light, mt, mp, &geometry.normal)
             {
                 geometry.normal = n;
@@ -211,18 +318,40 @@ impl Pooled {
     }
 
     /// The second-order bias of each cell's mean against the model at its virtual pixel
-    /// (weighted, three per cell, then zeros for the kept pixels), for the given parameters.
+    /// (weighted, three per cell), for the given parameters.
     pub fn biases(&self, cells: &[Cell], model: &Model, p: &Params) -> Vec<f64> {
         let h = 0.25 * BASE_WIDTH;
-        let mut b: Vec<f64> = cells
+        let b: Vec<f64> = cells
             .par_iter()
             .flat_map_iter(|c| {
                 let o = self.virtual_obs(c);
-                let [vt, vp, ct] = c.covariance();
-                let (mt, mp) = c.mean();
                 let g = o.geometry;
+                // The cell's two coordinates, their covariance and the normal at a point.
+                let (mt, mp) = c.mean();
+                let (t1, t2) = crate::outline::tangent_basis(&g.normal);
+                let [vt, vp, ct] = if c.spatial {
+                    let k = c.n;
+                    let nm = &c.normals;
+                    let mean = Vector3::new(nm[0], nm[1], nm[2]) / k;
+                    let second = nalgebra::Matrix3::new(
+                        nm[3], nm[6], nm[7], nm[6], nm[4], nm[8], nm[7], nm[8], nm[5],
+                    ) / k;
+                    let cov = second - mean * mean.transpose();
+                    [
+                        t1.dot(&(cov * t1)).max(0.0),
+                        t2.dot(&(cov * t2)).max(0.0),
+                        t1.dot(&(cov * t2)),
+                    ]
+                } else {
+                    c.covariance()
+                };
                 let at = |dt: f64, dp: f64| -> [f64; 3] {
-                    match normal_with_angles(&g.view, &self.light, mt + dt, mp + dp, &g.normal) {
+                    let n = if c.spatial {
+                        Some((g.normal + t1 * dt + t2 * dp).normalize())
+                    } else {
+                        normal_with_angles(&g.view, &self.light, mt + dt, mp + dp, &g.normal)
+                    };
+                    match n {
                         Some(n) => model.radiance(p, &Geometry { normal: n, ..g }),
                         None => [f64::NAN; 3],
                     }
@@ -244,16 +373,25 @@ impl Pooled {
                 })
             })
             .collect();
-        b.extend(std::iter::repeat_n(0.0, 3 * self.kept.len()));
         b
     }
 
-    /// The shift of the free parameters that pooling at `cells` causes, in units of their
-    /// standard errors: (JᵀJ)⁻¹ Jᵀ b / σ, with J the weighted Jacobian at `p` and b the
-    /// [`biases`](Self::biases). Returns the largest |shift| over the parameters (∞ when JᵀJ is
-    /// singular).
-    pub fn shift(&self, cells: &[Cell], model: &Model, p: &Params, free: [bool; N_PARAMS]) -> f64 {
-        let obs = self.observations(cells);
+    /// The shift of the free parameters that pooling at `cells` causes: d = (JᵀJ)⁻¹ Jᵀ b, with J
+    /// the weighted Jacobian at `p` and b the [`biases`](Self::biases), against each parameter's
+    /// standard error σ(JᵀJ)⁻¹ᐟ². `cells` and `extra` together are all the observations' cells
+    /// (e.g. the (θ, φ) cells and the highlight's). Sums over cells are estimated from every k-th cell when there are more than
+    /// [`SHIFT_CELLS`]: d does not change with k, the standard errors shrink by √k.
+    pub fn shift(
+        &self,
+        cells: &[Cell],
+        extra: &[Cell],
+        model: &Model,
+        p: &Params,
+        free: [bool; N_PARAMS],
+    ) -> Shift {
+        let k = (cells.len() + extra.len()).div_ceil(SHIFT_CELLS).max(1);
+        let sub: Vec<Cell> = cells.iter().chain(extra).step_by(k).cloned().collect();
+        let obs: Vec<Obs> = sub.iter().map(|c| self.virtual_obs(c)).collect();
         let problem = crate::solver::Problem {
             model: *model,
             obs: &obs,
@@ -262,21 +400,113 @@ impl Pooled {
             priors: vec![],
             history: None,
         };
+        let idx: Vec<usize> = (0..N_PARAMS).filter(|&i| free[i]).collect();
+        let none = Shift {
+            max_std: f64::INFINITY,
+            within_tolerance: false,
+            params: idx.clone(),
+            shift: vec![f64::INFINITY; idx.len()],
+            std: vec![0.0; idx.len()],
+        };
         let (res, jac) = problem.evaluate(true);
-        let Some(j) = jac else { return f64::INFINITY };
-        let b = DVector::from_vec(self.biases(cells, model, p));
+        let Some(j) = jac else { return none };
+        let b = DVector::from_vec(self.biases(&sub, model, p));
         let jtj: DMatrix<f64> = j.transpose() * &j;
-        let Some(cov) = jtj.clone().try_inverse() else {
-            return f64::INFINITY;
+        let Some(cov) = jtj.try_inverse() else {
+            return none;
         };
         // Residual scale: weights are meant to be 1/σ, so σ² ≈ 1; use the measured one.
         let dof = res.len().saturating_sub(j.ncols()).max(1) as f64;
         let s2 = (res.norm_squared() / dof).max(1e-300);
         let d = &cov * (j.transpose() * b);
-        (0..d.len())
-            .map(|k| d[k].abs() / (s2 * cov[(k, k)]).sqrt())
-            .fold(0.0, f64::max)
+        let std: Vec<f64> = (0..d.len())
+            .map(|i| (s2 * cov[(i, i)] / k as f64).sqrt())
+            .collect();
+        let max_std = (0..d.len())
+            .map(|i| d[i].abs() / std[i])
+            .fold(0.0, f64::max);
+        let within_tolerance = idx
+            .iter()
+            .enumerate()
+            .all(|(i, &q)| d[i].abs() <= tolerance(q) || d[i].abs() <= SHIFT_STD * std[i]);
+        Shift {
+            max_std,
+            within_tolerance,
+            params: idx,
+            shift: d.iter().cloned().collect(),
+            std,
+        }
     }
+}
+
+/// Cells used to estimate a level's shift (every k-th beyond this many).
+pub const SHIFT_CELLS: usize = 30_000;
+/// A shift of this many standard errors is accepted.
+pub const SHIFT_STD: f64 = 0.3;
+
+/// The shift of a parameter (in the solver's unbounded units) that is accepted whatever its
+/// standard error, a tenth or less of the accuracy the rest of the chain reaches (README,
+/// "Solve: measured"): 0.1% of σ0, albedo and α; 1% of ks (whose accuracy is bounded by F(η)
+/// with η at its prior: 2–5%); 0.5% of η − 1 (0.002 in η); 0.005° of the light angles; 0.001 of
+/// the extensions.
+pub fn tolerance(param: usize) -> f64 {
+    use crate::model::idx;
+    match param {
+        idx::AZIMUTH | idx::ELEVATION => 0.005f64.to_radians(),
+        idx::ETA => 5e-3,
+        idx::KS => 1e-2,
+        _ => 1e-3,
+    }
+}
+
+/// What pooling at a level is predicted to do to the fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shift {
+    /// The largest |shift| in standard errors.
+    pub max_std: f64,
+    /// Every parameter's shift is below [`SHIFT_STD`] standard errors or below its
+    /// [`tolerance`].
+    pub within_tolerance: bool,
+    /// Free parameters (model indices), their shifts and standard errors (unbounded units).
+    pub params: Vec<usize>,
+    pub shift: Vec<f64>,
+    pub std: Vec<f64>,
+}
+
+impl Shift {
+    /// The parameter whose shift is largest against what is accepted for it.
+    pub fn limiting(&self) -> Option<usize> {
+        (0..self.params.len())
+            .map(|i| {
+                let allowed = tolerance(self.params[i]).max(SHIFT_STD * self.std[i]);
+                (self.params[i], self.shift[i].abs() / allowed)
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|x| x.0)
+    }
+}
+
+/// Merge cells with the same sphere and `key` (sorted by them): an index sort and one pass; only
+/// the merged cells are copied.
+fn group(cells: &[Cell], key: impl Fn(&Cell) -> (i64, i64, bool) + Sync) -> Vec<Cell> {
+    let mut order: Vec<(usize, (i64, i64, bool), u32)> = cells
+        .par_iter()
+        .enumerate()
+        .map(|(i, c)| (c.sphere, key(c), i as u32))
+        .collect();
+    order.par_sort_unstable();
+    let mut out: Vec<Cell> = Vec::new();
+    let mut last_key = None;
+    for (sphere, k, i) in order {
+        let c = &cells[i as usize];
+        if last_key == Some((sphere, k)) {
+            out.last_mut().expect("a cell").absorb(c);
+        } else {
+            out.push(Cell { key: k, ..*c });
+            last_key = Some((sphere, k));
+        }
+    }
+    out
 }
 
 /// The unit normal at angle θ from `light` and φ from `view`, on the side of the light–view plane

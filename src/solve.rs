@@ -203,6 +203,9 @@ pub struct Timings {
     pub model_choice_s: f64,
     pub holdout_s: f64,
     pub total_s: f64,
+    /// The solve stage's phases (joint method), seconds.
+    #[serde(default)]
+    pub solve_phases: Vec<(String, f64)>,
 }
 
 /// `fit.json`.
@@ -597,6 +600,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
             };
             let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            l.timings.solve_phases = jf.phases.clone();
             notes.extend(jf.notes.iter().cloned());
             if !jf.specular {
                 l.skipped

@@ -215,7 +215,10 @@ impl Problem<'_> {
                 }
                 (a, b, c)
             })
-            .reduce(zero, |(a1, b1, c1), (a2, b2, c2)| {
+            .collect::<Vec<_>>()
+            .into_iter()
+            // Summed in chunk order: the same result on every run.
+            .fold(zero(), |(a1, b1, c1), (a2, b2, c2)| {
                 (a1 + a2, b1 + b2, c1 + c2)
             });
         for i in 0..n {

@@ -236,23 +236,26 @@ fn pooled_cells_fit_like_every_pixel_and_the_predicted_shift_says_how_far() {
     let l = p.light.direction();
     let mut pooled = workbench::reduce::Pooled::new(l, (3.0f64 * 0.1).atan());
     for (k, chunk) in obs.chunks(per).enumerate() {
-        pooled.add_sphere(k, chunk);
+        pooled.add_sphere(k, chunk, None);
     }
     assert_eq!(pooled.pixels, obs.len());
     let mut measured = vec![];
     for factor in [2u32, 4, 8, 16] {
         let deg = factor as f64 * 0.25;
-        let cells = pooled.merged(factor);
+        let mut cells = pooled.merged(factor);
+        cells.extend(pooled.highlight_cells(1));
         let reduced = pooled.observations(&cells);
         // The pixel count and radiance sums are kept exactly.
-        let n: f64 = cells.iter().map(|c| c.n).sum::<f64>() + pooled.kept.len() as f64;
+        let n: f64 = cells.iter().map(|c| c.n).sum::<f64>();
         assert_eq!(n as usize, obs.len());
         let f = solver::fit(Model::default(), &reduced, &p, free, &[]);
         // Largest difference from the all-pixel fit, in units of that fit's standard error.
         let z = (0..6)
             .map(|k| (f.params.to_vec()[k] - full.params.to_vec()[k]).abs() / full.std[k])
             .fold(0.0, f64::max);
-        let predicted = pooled.shift(&cells, &Model::default(), &full.params, free);
+        let predicted = pooled
+            .shift(&cells, &[], &Model::default(), &full.params, free)
+            .max_std;
         let light = f
             .params
             .light
