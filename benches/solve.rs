@@ -10,7 +10,8 @@
 //!    its folder: each radius held out in turn, joint against paper, next to the render's own noise
 //!    level (its scene.json), the light error against the scene's, and the model choice.
 //!
-//! Prints Markdown tables. `--quick` skips the 24 MP part and the 5% JPEG session.
+//! Prints Markdown tables. `--quick` skips the 24 MP part and the 5% JPEG session; `--pbr-only`
+//! runs part 4 alone.
 
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
@@ -323,6 +324,13 @@ fn pbr(dir: &Path) {
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
+    if std::env::args().any(|a| a == "--pbr-only") {
+        match std::env::var("PBR_SESSION") {
+            Ok(p) => pbr(Path::new(&p)),
+            Err(_) => println!("--pbr-only needs PBR_SESSION"),
+        }
+        return;
+    }
     let out = PathBuf::from("target/bench-solve");
     println!("| session | method | σ0 error (%) | σ0 error / std | albedo error (%) | light error (°) | η error ± std | ks error (%) | α error (%) | solve (s) |");
     println!("|---|---|---|---|---|---|---|---|---|---|");

@@ -257,3 +257,60 @@ fn detect_writes_detections_and_overlays_and_refuses_a_wrong_count() {
     );
     assert_clean_failure(&["detect", "/nonexistent/session"], "/nonexistent/session");
 }
+
+#[test]
+fn solve_writes_fit_json_and_refuses_bad_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let o = out.to_str().unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet", "synth", "session", "--out", o, "--size", "640x480", "--fx", "700", "--radii",
+        "20,12", "--layout", "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let fit = dir.path().join("fit.json");
+    let f = fit.to_str().unwrap();
+    let (code, stdout, err) = wb(&["--quiet", "solve", "--joint", o, "--out", f]);
+    assert_eq!(code, 0, "{err}");
+    for key in [
+        "sigma0",
+        "albedo",
+        "eta",
+        "specular",
+        "light",
+        "solver   converged",
+        "wrote",
+    ] {
+        assert!(stdout.contains(key), "{key}: {stdout}");
+    }
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
+    assert_eq!(v["schema"], "workbench.fit/1");
+    assert_eq!(v["sigma0_mm"].as_array().unwrap().len(), 3);
+    // Detection ran once and wrote detections.json beside session.json.
+    assert!(out.join("detections.json").is_file());
+    assert_clean_failure(&["solve", o, "--reduce", "3"], "cell width");
+    assert_clean_failure(&["solve", o, "--prior", "alpha=0.1:0.1"], "eta only");
+    assert_clean_failure(&["solve", o, "--prior", "eta=0.9:0.1"], "1 < mean");
+    assert_clean_failure(&["solve", o, "--extensions", "wiggle"], "unknown extension");
+    assert_clean_failure(&["solve", o, "--irradiance", "-1"], "positive");
+    assert_clean_failure(
+        &["solve", o, "--joint", "--method", "paper"],
+        "cannot be used",
+    );
+    let nope = dir.path().join("nope.json");
+    assert_clean_failure(
+        &[
+            "--quiet",
+            "solve",
+            o,
+            "--holdout",
+            "17",
+            "--out",
+            nope.to_str().unwrap(),
+        ],
+        "--holdout 17",
+    );
+    assert!(!nope.exists());
+    assert_clean_failure(&["solve", "/nonexistent/session"], "/nonexistent/session");
+}
