@@ -10,6 +10,9 @@
 //! at the mean level of its two row neighbours (its own value would favour pixels whose noise
 //! happened to be negative).
 //!
+//! Pixels whose row neighbours lie within 3σ of full scale are left out with the clipped ones: near
+//! clipping the noise is censored and what remains averages low.
+//!
 //! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
 //! pixels away from the spheres ([`background`]) and subtracted from every sample.
 
@@ -248,6 +251,8 @@ pub fn observe(
                 0.5 / ((1u32 << images[i].bits.min(16)) as f64) / info.exposure.unwrap_or(1.0);
             let model = noise_model(&smp, floor);
             let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
+            // Full scale (pixel value 1) in the samples' units.
+            let full_scale = [0, 1, 2].map(|c| 1.0 / info.exposure.unwrap_or(1.0) - floor_rgb[c]);
             let noise = {
                 let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
                 lv.sort_by(|a, b| a.total_cmp(b));
@@ -292,6 +297,14 @@ pub fn observe(
                         }
                     }
                 }
+                let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
+                // Near full scale the noise is censored (values pushed over it were clipped and
+                // left out), so the rest average low: leave out pixels whose neighbours' level
+                // is within 3σ of clipping.
+                if (0..3).any(|c| level[c] + 3.0 * sigma(c, level[c]) >= full_scale[c]) {
+                    out.saturated += 1;
+                    continue;
+                }
                 out.obs.push(Obs {
                     geometry: Geometry {
                         normal: x.normal,
@@ -299,9 +312,7 @@ pub fn observe(
                         radius_mm: s.radius_mm,
                     },
                     radiance: x.radiance,
-                    weight: [0, 1, 2].map(|c| {
-                        1.0 / sigma(c, if n > 0.0 { level[c] / n } else { x.radiance[c] })
-                    }),
+                    weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
                 });
                 out.px.push(x.px);
                 out.highlight.push(x.flags & samples::HIGHLIGHT != 0);
