@@ -145,8 +145,14 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
     let mut plot = Plot::new(
         &format!("Reduction levels ({label})"),
         "solve time (s)",
-        "largest parameter shift from the every-pixel fit (std)",
+        "log10 of the largest parameter shift from the every-pixel fit (std)",
     );
+    plot.layers.push(Layer::HLine {
+        y: (0.3f64).log10(),
+        color: workbench::plot::GREY,
+        dashed: true,
+        label: Some("0.3 std (auto's limit)".into()),
+    });
     for (k, (name, secs, jf)) in results.iter().enumerate() {
         let p = jf.fit.params.to_vec();
         let shift = (0..N_PARAMS)
@@ -201,7 +207,7 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
                 .to_degrees()
         );
         plot.layers.push(Layer::Points {
-            xy: vec![(*secs, shift.max(1e-3))],
+            xy: vec![(*secs, shift.max(1e-3).log10())],
             color: PALETTE[k % PALETTE.len()],
             size: 6,
             label: Some(format!(

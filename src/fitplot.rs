@@ -1,6 +1,7 @@
 //! Figures of a fit (`solve --plots <dir>`), drawn with [`crate::plot`]: the green channel's
 //! radiance against θ per radius (data as 1° bin means, the model's prediction at the same pixels
-//! as lines; the held-out sphere dashed), and the relative residual against θ per radius.
+//! as lines; the held-out radius marked in the legend and drawn thicker), and the relative residual
+//! against θ per radius.
 
 use crate::error::Result;
 use crate::model::{Model, Params};
@@ -79,18 +80,20 @@ pub fn write_all(
             size: 2,
             label: Some(format!("{name} data")),
         });
+        // Solid even when held out (a dashed line on a jagged, few-pixel curve is unreadable): the
+        // legend says which radius was held out, and its line is thicker.
         fig.layers.push(Layer::Line {
             xy: pred,
             color,
-            width: 2,
-            dashed: held,
+            width: if held { 3 } else { 2 },
+            dashed: false,
             label: Some(format!("{name} model")),
         });
         res.layers.push(Layer::Line {
             xy: resid,
             color,
-            width: 2,
-            dashed: held,
+            width: if held { 3 } else { 2 },
+            dashed: false,
             label: Some(name),
         });
     }

@@ -440,7 +440,7 @@ impl Pooled {
 }
 
 /// Cells used to estimate a level's shift (every k-th beyond this many).
-pub const SHIFT_CELLS: usize = 30_000;
+pub const SHIFT_CELLS: usize = 10_000;
 /// A shift of this many standard errors is accepted.
 pub const SHIFT_STD: f64 = 0.3;
 
