@@ -326,20 +326,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         diffuse_start(&model, &coarse, &start_light, eta_mean, setup.start_sigma0)
     };
     lap("start values", &mut phases);
-    let mut p = Params {
-        material: crate::model::Material {
-            sigma0_mm: s0,
-            albedo: a0,
-            eta: eta_mean,
-            specular: crate::model::SpecularParams {
-                ks: 0.0,
-                alpha: setup.alpha.unwrap_or(ALPHA_PRIOR),
-            },
-            sigma_exponent: 0.0,
-            albedo_curvature: 0.0,
-        },
-        light: start_light,
-    };
+    let mut p = Params::diffuse(s0, a0, eta_mean, start_light);
+    p.material.specular.alpha = setup.alpha.unwrap_or(ALPHA_PRIOR);
     let mut stages = vec![];
     // Stage: diffuse, on 2° cells without the highlight.
     let mut free = [false; N_PARAMS];

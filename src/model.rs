@@ -125,6 +125,24 @@ pub struct Params {
 }
 
 impl Params {
+    /// A diffuse-only material (ks = 0, α = 0.1 for when a lobe is switched on, no extensions).
+    pub fn diffuse(sigma0_mm: [f64; 3], albedo: [f64; 3], eta: f64, light: LightAngles) -> Params {
+        Params {
+            material: Material {
+                sigma0_mm,
+                albedo,
+                eta,
+                specular: SpecularParams {
+                    ks: 0.0,
+                    alpha: 0.1,
+                },
+                sigma_exponent: 0.0,
+                albedo_curvature: 0.0,
+            },
+            light,
+        }
+    }
+
     pub fn to_vec(&self) -> [f64; N_PARAMS] {
         let m = &self.material;
         [

@@ -7,7 +7,7 @@
 
 use crate::fresnel;
 use crate::joint::Prediction;
-use crate::model::{idx, LightAngles, Material, Model, Params, SpecularParams, N_PARAMS};
+use crate::model::{idx, LightAngles, Model, Params, N_PARAMS};
 use crate::observe::SphereData;
 use crate::reduce::Pooled;
 use crate::solver::{self, Obs};
@@ -141,20 +141,7 @@ pub fn fit(
         }
         let obs = pooled.observations(&pooled.merged(FACTOR));
         let (s0, a0) = crate::joint::diffuse_start(&model, &obs, &angles, eta, None);
-        let start = Params {
-            material: Material {
-                sigma0_mm: s0,
-                albedo: a0,
-                eta,
-                specular: SpecularParams {
-                    ks: 0.0,
-                    alpha: 0.1,
-                },
-                sigma_exponent: 0.0,
-                albedo_curvature: 0.0,
-            },
-            light: angles,
-        };
+        let start = Params::diffuse(s0, a0, eta, angles);
         let mut free = [false; N_PARAMS];
         free[..6].fill(true);
         let f = solver::fit(model, &obs, &start, free, &[]);
@@ -195,20 +182,7 @@ pub fn fit(
     }
     PaperFit {
         per_radius,
-        params: Params {
-            material: Material {
-                sigma0_mm: sigma0,
-                albedo,
-                eta,
-                specular: SpecularParams {
-                    ks: 0.0,
-                    alpha: 0.1,
-                },
-                sigma_exponent: 0.0,
-                albedo_curvature: 0.0,
-            },
-            light: angles,
-        },
+        params: Params::diffuse(sigma0, albedo, eta, angles),
         std,
         mask_deg: mask.to_degrees(),
         eta,

@@ -549,6 +549,9 @@ fn parse_extensions(name: &str) -> Extensions {
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
     let mut l = load(opts)?;
+    // Stages after loading (detection shows its own bar): fit, predictions, output.
+    let pb = crate::progress::bar(3, "solve", opts.quiet);
+    pb.enable_steady_tick(std::time::Duration::from_millis(200));
     let out = opts
         .out
         .clone()
@@ -705,6 +708,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         }
     };
     l.timings.solve_s = t_solve.elapsed().as_secs_f64() - l.timings.model_choice_s;
+    pb.inc(1);
     // Predictions per sphere (the held-out one included).
     let t_hold = Instant::now();
     let model = Model::default();
@@ -754,6 +758,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         }
     });
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
+    pb.inc(1);
     let used: Vec<&SphereRmse> = spheres.iter().filter(|s| !s.held_out).collect();
     let n: f64 = used.iter().map(|s| s.pixels as f64).sum::<f64>().max(1.0);
     let overall = (used
@@ -872,6 +877,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         };
         crate::fitplot::write_all(&l.spheres, &params_for, opts.holdout, title, dir)?;
     }
+    pb.finish_and_clear();
     Ok(fit)
 }
 
