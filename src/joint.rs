@@ -97,6 +97,8 @@ pub struct Setup {
     /// A previous fit of the same scene to start from: the start-value search and the diffuse
     /// stage are skipped (used to refit subsets, e.g. for held-out errors).
     pub warm: Option<Params>,
+    /// Keep the light at the detector's estimate (or the given start) instead of refining it.
+    pub hold_light: bool,
 }
 
 /// One stage's convergence record.
@@ -332,8 +334,19 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     // Stage: diffuse, on 2° cells without the highlight.
     let mut free = [false; N_PARAMS];
     free[..6].fill(true);
-    free[idx::AZIMUTH] = true;
-    free[idx::ELEVATION] = true;
+    free[idx::AZIMUTH] = !setup.hold_light;
+    free[idx::ELEVATION] = !setup.hold_light;
+    if setup.hold_light {
+        let why = if setup.start_light.is_some() {
+            "fixed: as given"
+        } else if setup.light.is_some() {
+            "fixed: from the detector"
+        } else {
+            "fixed: from the shading"
+        };
+        status[idx::AZIMUTH] = why.into();
+        status[idx::ELEVATION] = why.into();
+    }
     let mut downweighted = 0;
     if let Some(w) = setup.warm {
         p = w;

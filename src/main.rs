@@ -98,6 +98,9 @@ struct SolveArgs {
     /// Run detection even when detections.json is newer than its inputs.
     #[arg(long)]
     redetect: bool,
+    /// Keep the light at the detector's estimate (or --start-light) instead of refining it.
+    #[arg(long)]
+    hold_light: bool,
     /// Write figures (PNG and SVG) into this folder.
     #[arg(long)]
     plots: Option<PathBuf>,
@@ -739,6 +742,7 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         elevation: el.to_radians(),
     });
     o.redetect = a.redetect;
+    o.hold_light = a.hold_light;
     o.plots = a.plots.clone();
     o.quiet = quiet;
     let f = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;

@@ -59,6 +59,8 @@ pub struct Options {
     pub start_light: Option<LightAngles>,
     /// Run detection even when detections.json is up to date.
     pub redetect: bool,
+    /// Keep the light at the detector's estimate.
+    pub hold_light: bool,
     pub plots: Option<PathBuf>,
     pub quiet: bool,
 }
@@ -78,6 +80,7 @@ impl Options {
             start_sigma0: None,
             start_light: None,
             redetect: false,
+            hold_light: false,
             plots: None,
             quiet: true,
         }
@@ -424,6 +427,7 @@ fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> S
         start_sigma0: opts.start_sigma0,
         start_light: opts.start_light,
         warm: None,
+        hold_light: opts.hold_light,
     }
 }
 

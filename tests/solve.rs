@@ -206,6 +206,16 @@ fn paper_baseline_and_holdout() {
             .unwrap();
     let dl = Vector3::from(d.light_direction.unwrap());
     assert!(Vector3::from(p.light_direction).angle(&dl) < 1e-9);
+    // The joint fit with the light held: the detector's light, σ0 still within 1%.
+    let held = solve_with(dir, "fit-hold.json", |o| o.hold_light = true);
+    assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
+    assert!(worst(&held.sigma0_mm, &t.sigma0_mm) < 0.01);
+    let az = held
+        .parameters
+        .iter()
+        .find(|p| p.name == "light_azimuth")
+        .unwrap();
+    assert_eq!(az.status, "fixed: from the detector");
     // Holdout: fit without the 15 mm sphere, predict it.
     let h = solve_with(dir, "fit-holdout.json", |o| o.holdout = Some(15.0));
     let ho = h.holdout.as_ref().unwrap();
