@@ -450,64 +450,62 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     // Reduction level.
     lap("specular start", &mut phases);
     let mut levels = vec![];
-    let raw: Vec<Obs> = spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect();
-    // Angular cells first (the highlight pixel by pixel), then the highlight's pixel blocks.
-    let (chosen_factor, block) = match setup.reduction {
-        Reduction::None => (None, 1),
-        Reduction::Factor(f) => (Some(f), 1),
+    let level = |f: u32, b: u32, n: usize, shift: &crate::reduce::Shift| Level {
+        width_deg: f as f64 * 0.25,
+        highlight_block_px: b,
+        observations: n,
+        predicted_shift_std: shift.max_std,
+        within_tolerance: shift.within_tolerance,
+        limiting: shift.limiting.map(|k| PARAM_NAMES[k].to_string()),
+    };
+    // Angular cells first (the highlight pixel by pixel), then the highlight's pixel blocks; the
+    // cells chosen are kept for the fit.
+    let (chosen_factor, block, chosen_cells) = match setup.reduction {
+        Reduction::None => (None, 1, None),
+        Reduction::Factor(f) => {
+            let mut cells = pooled.merged(f);
+            cells.extend(pooled.highlight_cells(1));
+            (Some(f), 1, Some(cells))
+        }
         Reduction::Auto => {
             let single = pooled.highlight_cells(1);
-            let pyramid = pooled.pyramid();
+            let mut pyramid = pooled.pyramid();
             let mut pick = None;
-            for (f, cells) in pyramid.iter().rev() {
-                let f = *f;
+            for (k, (f, cells)) in pyramid.iter().enumerate().rev() {
                 let shift = pooled.shift(cells, &single, &model, &p, free);
-                levels.push(Level {
-                    width_deg: f as f64 * 0.25,
-                    highlight_block_px: 1,
-                    observations: cells.len() + single.len(),
-                    predicted_shift_std: shift.max_std,
-                    within_tolerance: shift.within_tolerance,
-                    limiting: shift.limiting().map(|k| PARAM_NAMES[k].to_string()),
-                });
+                levels.push(level(*f, 1, cells.len() + single.len(), &shift));
                 if shift.within_tolerance {
-                    pick = Some(f);
+                    pick = Some(k);
                     break;
                 }
             }
-            let mut block = 1;
-            if let Some(f) = pick {
-                let angular = &pyramid.iter().find(|l| l.0 == f).expect("a level").1;
-                for b in HIGHLIGHT_BLOCKS {
-                    if pooled.kept.len() < 4 * (b * b) as usize {
-                        continue;
+            match pick {
+                None => (None, 1, None),
+                Some(k) => {
+                    let (f, mut angular) = pyramid.swap_remove(k);
+                    let mut highlight = (1, single);
+                    for b in HIGHLIGHT_BLOCKS {
+                        if pooled.kept.len() < 4 * (b * b) as usize {
+                            continue;
+                        }
+                        let hl = pooled.highlight_cells(b);
+                        let shift = pooled.shift(&angular, &hl, &model, &p, free);
+                        levels.push(level(f, b, angular.len() + hl.len(), &shift));
+                        if shift.within_tolerance {
+                            highlight = (b, hl);
+                            break;
+                        }
                     }
-                    let hl = pooled.highlight_cells(b);
-                    let shift = pooled.shift(angular, &hl, &model, &p, free);
-                    levels.push(Level {
-                        width_deg: f as f64 * 0.25,
-                        highlight_block_px: b,
-                        observations: angular.len() + hl.len(),
-                        predicted_shift_std: shift.max_std,
-                        within_tolerance: shift.within_tolerance,
-                        limiting: shift.limiting().map(|k| PARAM_NAMES[k].to_string()),
-                    });
-                    if shift.within_tolerance {
-                        block = b;
-                        break;
-                    }
+                    angular.extend(highlight.1);
+                    (Some(f), highlight.0, Some(angular))
                 }
             }
-            (pick, block)
         }
     };
-    let final_obs = match chosen_factor {
-        Some(f) => {
-            let mut cells = pooled.merged(f);
-            cells.extend(pooled.highlight_cells(block));
-            pooled.observations(&cells)
-        }
-        None => raw,
+    let final_obs = match &chosen_cells {
+        Some(cells) => pooled.observations(cells),
+        // Every pixel.
+        None => spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect(),
     };
     let tried = levels.iter().find(|l| {
         Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25) && l.highlight_block_px == block

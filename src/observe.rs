@@ -38,10 +38,6 @@ pub struct SphereData {
     pub obs: Vec<Obs>,
     /// Per observation: its pixel.
     pub px: Vec<[u32; 2]>,
-    /// Per observation: inside the highlight (flag of [`crate::samples`]).
-    pub highlight: Vec<bool>,
-    /// Per observation: angle between normal and the detected light (radians).
-    pub theta: Vec<f64>,
     /// Pixels on the sphere, and how many were left out as saturated or on the edge.
     pub pixels: usize,
     pub saturated: usize,
@@ -265,8 +261,6 @@ pub fn observe(
                 radius_mm: s.radius_mm,
                 obs: vec![],
                 px: vec![],
-                highlight: vec![],
-                theta: vec![],
                 pixels: smp.len(),
                 saturated: 0,
                 edge: 0,
@@ -315,8 +309,6 @@ pub fn observe(
                     weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
                 });
                 out.px.push(x.px);
-                out.highlight.push(x.flags & samples::HIGHLIGHT != 0);
-                out.theta.push(x.theta);
             }
             out
         })

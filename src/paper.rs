@@ -163,22 +163,11 @@ pub fn fit(
     let mut sigma0 = [0.0; 3];
     let mut albedo = [0.0; 3];
     for c in 0..3 {
-        let (m, s) = combine(
-            &per_radius
-                .iter()
-                .map(|r| (r.sigma0_mm[c], r.sigma0_std[c]))
-                .collect::<Vec<_>>(),
-        );
-        sigma0[c] = m;
-        std[idx::SIGMA0 + c] = s;
-        let (m, s) = combine(
-            &per_radius
-                .iter()
-                .map(|r| (r.albedo[c], r.albedo_std[c]))
-                .collect::<Vec<_>>(),
-        );
-        albedo[c] = m;
-        std[idx::ALBEDO + c] = s;
+        let of = |f: &dyn Fn(&RadiusFit) -> (f64, f64)| {
+            combine(&per_radius.iter().map(f).collect::<Vec<_>>())
+        };
+        (sigma0[c], std[idx::SIGMA0 + c]) = of(&|r| (r.sigma0_mm[c], r.sigma0_std[c]));
+        (albedo[c], std[idx::ALBEDO + c]) = of(&|r| (r.albedo[c], r.albedo_std[c]));
     }
     PaperFit {
         per_radius,

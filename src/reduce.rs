@@ -404,6 +404,7 @@ impl Pooled {
         let none = Shift {
             max_std: f64::INFINITY,
             within_tolerance: false,
+            limiting: None,
             params: idx.clone(),
             shift: vec![f64::INFINITY; idx.len()],
             std: vec![0.0; idx.len()],
@@ -425,13 +426,16 @@ impl Pooled {
         let max_std = (0..d.len())
             .map(|i| d[i].abs() / std[i])
             .fold(0.0, f64::max);
-        let within_tolerance = idx
+        // Each shift against what is accepted for its parameter.
+        let worst = idx
             .iter()
             .enumerate()
-            .all(|(i, &q)| d[i].abs() <= tolerance(q) || d[i].abs() <= SHIFT_STD * std[i]);
+            .map(|(i, &q)| (q, d[i].abs() / tolerance(q).max(SHIFT_STD * std[i])))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
         Shift {
             max_std,
-            within_tolerance,
+            within_tolerance: worst.is_none_or(|w| w.1 <= 1.0),
+            limiting: worst.map(|w| w.0),
             params: idx,
             shift: d.iter().cloned().collect(),
             std,
@@ -467,23 +471,12 @@ pub struct Shift {
     /// Every parameter's shift is below [`SHIFT_STD`] standard errors or below its
     /// [`tolerance`].
     pub within_tolerance: bool,
+    /// The parameter whose shift is largest against what is accepted for it.
+    pub limiting: Option<usize>,
     /// Free parameters (model indices), their shifts and standard errors (unbounded units).
     pub params: Vec<usize>,
     pub shift: Vec<f64>,
     pub std: Vec<f64>,
-}
-
-impl Shift {
-    /// The parameter whose shift is largest against what is accepted for it.
-    pub fn limiting(&self) -> Option<usize> {
-        (0..self.params.len())
-            .map(|i| {
-                let allowed = tolerance(self.params[i]).max(SHIFT_STD * self.std[i]);
-                (self.params[i], self.shift[i].abs() / allowed)
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|x| x.0)
-    }
 }
 
 /// Merge cells with the same sphere and `key` (sorted by them): an index sort and one pass; only

@@ -193,6 +193,9 @@ pub struct Candidate {
 pub struct ModelChoice {
     pub candidates: Vec<Candidate>,
     pub chosen: String,
+    /// `chosen`, as the extensions it names.
+    #[serde(skip)]
+    pub extensions: Extensions,
     pub reason: String,
 }
 
@@ -459,6 +462,7 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
         return ModelChoice {
             candidates: vec![],
             chosen: "plain".into(),
+            extensions: Extensions::default(),
             reason: format!(
                 "{} radii: leaving one out leaves fewer than the 3 an extension needs",
                 radii.len()
@@ -513,14 +517,14 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
         .filter(|c| c.converged)
         .map(|c| c.heldout_rel_rmse)
         .fold(f64::INFINITY, f64::min);
-    let best = results
+    let k = results
         .iter()
-        .find(|c| c.converged && c.heldout_rel_rmse <= 1.01 * lowest)
-        .cloned()
-        .unwrap_or(results[0].clone());
-    let (chosen, reason) = if best.extensions != "plain" && best.heldout_rel_rmse < 0.98 * plain {
+        .position(|c| c.converged && c.heldout_rel_rmse <= 1.01 * lowest)
+        .unwrap_or(0);
+    let best = &results[k];
+    let (chosen, reason) = if k != 0 && best.heldout_rel_rmse < 0.98 * plain {
         (
-            best.extensions.clone(),
+            candidates[k],
             format!(
                 "held-out error {:.4} against {:.4} for the plain model",
                 best.heldout_rel_rmse, plain
@@ -528,7 +532,7 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
         )
     } else {
         (
-            "plain".into(),
+            Extensions::default(),
             format!(
                 "no extension lowers the held-out error by 2% (plain {:.4}, best {:.4} for {})",
                 plain, best.heldout_rel_rmse, best.extensions
@@ -537,15 +541,9 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
     };
     ModelChoice {
         candidates: results,
-        chosen,
+        chosen: chosen.name(),
+        extensions: chosen,
         reason,
-    }
-}
-
-fn parse_extensions(name: &str) -> Extensions {
-    Extensions {
-        sigma_exponent: name.contains("sigma-exponent"),
-        albedo_curvature: name.contains("albedo-curvature"),
     }
 }
 
@@ -600,7 +598,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                     let t = Instant::now();
                     let mc = choose_extensions(opts, &l, &fitted);
                     l.timings.model_choice_s = t.elapsed().as_secs_f64();
-                    let e = parse_extensions(&mc.chosen);
+                    let e = mc.extensions;
                     notes.push(format!("model: {} ({})", mc.chosen, mc.reason));
                     model_choice = Some(mc);
                     e

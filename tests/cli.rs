@@ -27,6 +27,29 @@ fn assert_clean_failure(args: &[&str], needle: &str) {
     );
 }
 
+/// A synthetic 640×480 photo of two spheres (20 and 12 mm) in a row, in `<tempdir>/s`.
+fn two_sphere_row() -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "session",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "640x480",
+        "--fx",
+        "700",
+        "--radii",
+        "20,12",
+        "--layout",
+        "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    (dir, out)
+}
+
 #[test]
 fn synth_then_check_a_session() {
     let dir = tempfile::tempdir().unwrap();
@@ -227,14 +250,8 @@ fn calibrate_a_synthetic_folder_and_refuse_an_empty_one() {
 
 #[test]
 fn detect_writes_detections_and_overlays_and_refuses_a_wrong_count() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("s");
+    let (_dir, out) = two_sphere_row();
     let o = out.to_str().unwrap();
-    let (code, _, err) = wb(&[
-        "--quiet", "synth", "session", "--out", o, "--size", "640x480", "--fx", "700", "--radii",
-        "20,12", "--layout", "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
     let (code, stdout, err) = wb(&["--quiet", "detect", o]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("light    session"), "{stdout}");
@@ -260,14 +277,8 @@ fn detect_writes_detections_and_overlays_and_refuses_a_wrong_count() {
 
 #[test]
 fn solve_writes_fit_json_and_refuses_bad_options() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("s");
+    let (dir, out) = two_sphere_row();
     let o = out.to_str().unwrap();
-    let (code, _, err) = wb(&[
-        "--quiet", "synth", "session", "--out", o, "--size", "640x480", "--fx", "700", "--radii",
-        "20,12", "--layout", "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
     let fit = dir.path().join("fit.json");
     let f = fit.to_str().unwrap();
     let (code, stdout, err) = wb(&["--quiet", "solve", "--joint", o, "--out", f]);
