@@ -29,6 +29,7 @@ pub mod photo;
 pub mod plot;
 pub mod progress;
 pub mod reduce;
+pub mod report;
 pub mod samples;
 pub mod session;
 pub mod silhouette;

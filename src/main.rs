@@ -36,6 +36,8 @@ enum Command {
     Detect(DetectArgs),
     /// Fit the material (σ0, albedo, η, specular lobe, light) to a session; write fit.json.
     Solve(SolveArgs),
+    /// Redraw a fit's figures and index.html from fit.json and its session, without solving.
+    Plot(PlotArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -104,6 +106,15 @@ struct SolveArgs {
     /// Write figures (PNG and SVG) into this folder.
     #[arg(long)]
     plots: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct PlotArgs {
+    /// The fit (fit.json written by `workbench solve`).
+    fit: PathBuf,
+    /// Folder for the figures (default: plots/ beside fit.json).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -752,7 +763,11 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         .unwrap_or_else(|| std::path::Path::new(&f.session).with_file_name("fit.json"));
     println!("wrote    {}", out.display());
     if let Some(d) = &a.plots {
-        println!("figures  {}", d.display());
+        println!(
+            "figures  {} (open {})",
+            d.display(),
+            d.join("index.html").display()
+        );
     }
     if !f.convergence.converged {
         eprintln!(
@@ -761,6 +776,20 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         );
         std::process::exit(3);
     }
+    Ok(())
+}
+
+fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
+    let out = a.out.clone().unwrap_or_else(|| {
+        a.fit
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join("plots")
+    });
+    let files = workbench::fitplot::replot(&a.fit, &out, quiet)
+        .with_context(|| format!("plot {}", a.fit.display()))?;
+    println!("figures  {} ({} files)", out.display(), files.len());
+    println!("index    {}", out.join("index.html").display());
     Ok(())
 }
 
@@ -841,6 +870,7 @@ fn main() {
         Command::Synth(Synth::Checkerboard(a)) => synth_checkerboard(a, cli.quiet),
         Command::Detect(a) => detect(a, cli.quiet),
         Command::Solve(a) => solve(a, cli.quiet),
+        Command::Plot(a) => plot(a, cli.quiet),
         Command::Check { session } => check(session),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate(a, cli.quiet),

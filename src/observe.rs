@@ -48,6 +48,76 @@ pub struct SphereData {
     pub noise_model: [[f64; 2]; 3],
     /// The photo's dark floor subtracted from the radiance (`None`: not measurable).
     pub floor: Option<[f64; 3]>,
+    /// The photo around the sphere, for figures.
+    pub crop: Crop,
+}
+
+/// A display copy of the photo around a sphere: sRGB 8-bit means of `step` × `step` pixel blocks,
+/// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Crop {
+    pub x0: u32,
+    pub y0: u32,
+    pub step: u32,
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+}
+
+impl Crop {
+    pub const MAX_CELLS: u32 = 160;
+
+    /// The crop of `bx` = [x0, y0, x1, y1] (inclusive pixel box), grown by 10% each side.
+    pub fn of(img: &crate::photo::LinearRgb, bx: [u32; 4]) -> Crop {
+        let grow = ((bx[2] - bx[0]).max(bx[3] - bx[1]) / 10).max(2);
+        let x0 = bx[0].saturating_sub(grow);
+        let y0 = bx[1].saturating_sub(grow);
+        let x1 = (bx[2] + grow).min(img.width.saturating_sub(1));
+        let y1 = (bx[3] + grow).min(img.height.saturating_sub(1));
+        if x1 < x0 || y1 < y0 {
+            return Crop::default();
+        }
+        let step = (x1 - x0 + 1)
+            .max(y1 - y0 + 1)
+            .div_ceil(Crop::MAX_CELLS)
+            .max(1);
+        let width = (x1 - x0 + 1).div_ceil(step);
+        let height = (y1 - y0 + 1).div_ceil(step);
+        let mut rgb = Vec::with_capacity((3 * width * height) as usize);
+        for j in 0..height {
+            for i in 0..width {
+                let mut sum = [0.0f64; 3];
+                let mut n = 0.0;
+                for y in (y0 + j * step)..(y0 + (j + 1) * step).min(y1 + 1) {
+                    for x in (x0 + i * step)..(x0 + (i + 1) * step).min(x1 + 1) {
+                        let k = 3 * (y as usize * img.width as usize + x as usize);
+                        for (s, v) in sum.iter_mut().zip(&img.data[k..k + 3]) {
+                            *s += *v as f64;
+                        }
+                        n += 1.0;
+                    }
+                }
+                rgb.extend(sum.map(|s| (255.0 * crate::photo::srgb_encode(s / n)).round() as u8));
+            }
+        }
+        Crop {
+            x0,
+            y0,
+            step,
+            width,
+            height,
+            rgb,
+        }
+    }
+
+    /// The block holding a pixel.
+    pub fn cell(&self, px: [u32; 2]) -> Option<(u32, u32)> {
+        if self.step == 0 || px[0] < self.x0 || px[1] < self.y0 {
+            return None;
+        }
+        let (i, j) = ((px[0] - self.x0) / self.step, (px[1] - self.y0) / self.step);
+        (i < self.width && j < self.height).then_some((i, j))
+    }
 }
 
 /// Observations of a session, with the time spent decoding and sampling.
@@ -267,6 +337,12 @@ pub fn observe(
                 noise,
                 noise_model: model,
                 floor: floors[i],
+                crop: s
+                    .outline
+                    .outline()
+                    .pixel_box(proj, 2.0, images[i].width, images[i].height)
+                    .map(|b| Crop::of(&images[i], b))
+                    .unwrap_or_default(),
             };
             for (k, x) in smp.iter().enumerate() {
                 if x.flags & samples::SATURATED != 0 {

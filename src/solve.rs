@@ -243,6 +243,9 @@ pub struct FitFile {
     /// The paper's per-radius fits (method "paper").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub per_radius: Option<Vec<RadiusFit>>,
+    /// The paper's baseline run beside a joint fit, for comparison (needs the detector's light).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline: Option<BaselineJson>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_choice: Option<ModelChoice>,
     pub reduction: Option<ReductionJson>,
@@ -251,6 +254,91 @@ pub struct FitFile {
     pub skipped: Vec<String>,
     pub notes: Vec<String>,
     pub timings: Timings,
+}
+
+/// The paper's baseline beside a joint fit: its assumptions and per-radius fits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaselineJson {
+    /// η divided out, the light taken from the detector (degrees), the mask around the peak.
+    pub eta: f64,
+    pub light_azimuth_deg: f64,
+    pub light_elevation_deg: f64,
+    pub mask_deg: f64,
+    /// Combined over radii.
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub per_radius: Vec<RadiusFit>,
+    pub seconds: f64,
+}
+
+impl BaselineJson {
+    /// The baseline's parameters for a radius: its own fit, or the combined one for a radius it
+    /// did not fit (held out).
+    pub fn params_for(&self, radius_mm: f64) -> Params {
+        let light = LightAngles {
+            azimuth: self.light_azimuth_deg.to_radians(),
+            elevation: self.light_elevation_deg.to_radians(),
+        };
+        match self
+            .per_radius
+            .iter()
+            .find(|r| (r.radius_mm - radius_mm).abs() < 1e-9)
+        {
+            Some(r) => Params::diffuse(r.sigma0_mm, r.albedo, self.eta, light),
+            None => Params::diffuse(self.sigma0_mm, self.albedo, self.eta, light),
+        }
+    }
+}
+
+impl FitFile {
+    /// The fitted parameters (all 13, as in `parameters`).
+    pub fn params(&self) -> Params {
+        let mut v = [0.0; N_PARAMS];
+        for p in &self.parameters {
+            if let Some(k) = PARAM_NAMES.iter().position(|n| *n == p.name) {
+                v[k] = p.value;
+            }
+        }
+        Params::from_vec(&v)
+    }
+
+    /// The parameters that predict spheres of a radius: the fit's, or for the paper's method that
+    /// radius's own fit (the combined one for a held-out radius).
+    pub fn params_for(&self, radius_mm: f64) -> Params {
+        let mut p = self.params();
+        if let Some(r) = self
+            .per_radius
+            .as_ref()
+            .and_then(|pr| pr.iter().find(|r| (r.radius_mm - radius_mm).abs() < 1e-9))
+        {
+            p.material.sigma0_mm = r.sigma0_mm;
+            p.material.albedo = r.albedo;
+        }
+        p
+    }
+
+    /// Check what was read: schema and parameter names.
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        if self.schema != SCHEMA {
+            return Err(Error::invalid(
+                file,
+                format!("schema {:?}, expected {SCHEMA:?}", self.schema),
+            ));
+        }
+        for name in PARAM_NAMES {
+            match self.parameters.iter().find(|p| p.name == name) {
+                Some(p) if p.value.is_finite() => {}
+                Some(_) => {
+                    return Err(Error::invalid(
+                        file,
+                        format!("parameter {name} is not finite"),
+                    ))
+                }
+                None => return Err(Error::invalid(file, format!("parameter {name} missing"))),
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Everything loaded before fitting.
@@ -575,6 +663,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
     let mut notes = vec![];
     let mut model_choice = None;
+    let mut baseline = None;
     let t_solve = Instant::now();
     struct Outcome {
         params: Params,
@@ -605,6 +694,22 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
             };
             let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            // The paper's baseline beside it, for the figures and a comparison (cheap: 1° cells).
+            if let Some(light) = l.light {
+                let t = Instant::now();
+                let pf = paper::fit(&fitted, &light, l.highlight_radius, opts.eta_prior.0);
+                let a = LightAngles::from_direction(&light);
+                baseline = Some(BaselineJson {
+                    eta: pf.eta,
+                    light_azimuth_deg: a.azimuth.to_degrees(),
+                    light_elevation_deg: a.elevation.to_degrees(),
+                    mask_deg: pf.mask_deg,
+                    sigma0_mm: pf.params.material.sigma0_mm,
+                    albedo: pf.params.material.albedo,
+                    per_radius: pf.per_radius,
+                    seconds: t.elapsed().as_secs_f64(),
+                });
+            }
             l.timings.solve_phases = jf.phases.clone();
             notes.extend(jf.notes.iter().cloned());
             if !jf.specular {
@@ -709,7 +814,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             }
         }
     };
-    l.timings.solve_s = t_solve.elapsed().as_secs_f64() - l.timings.model_choice_s;
+    l.timings.solve_s = t_solve.elapsed().as_secs_f64()
+        - l.timings.model_choice_s
+        - baseline.as_ref().map_or(0.0, |b: &BaselineJson| b.seconds);
     pb.inc(1);
     // Predictions per sphere (the held-out one included).
     let t_hold = Instant::now();
@@ -855,6 +962,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         },
         holdout,
         per_radius: outcome.per_radius,
+        baseline,
         model_choice,
         reduction: outcome.reduction,
         convergence: outcome.convergence,
@@ -867,17 +975,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     };
     crate::output::write_json(&out, &fit)?;
     if let Some(dir) = &opts.plots {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let joint_params = outcome.params;
-        let params_for = |s: &SphereData| match &outcome.paper {
-            Some(pf) if !is_held(s) => pf.params_for(s.radius_mm),
-            _ => joint_params,
-        };
-        let title = match opts.method {
-            Method::Joint => "joint fit",
-            Method::Paper => "paper baseline",
-        };
-        crate::fitplot::write_all(&l.spheres, &params_for, opts.holdout, title, dir)?;
+        crate::fitplot::write_all(&fit, &out, &l.spheres, dir)?;
     }
     pb.finish_and_clear();
     Ok(fit)

@@ -3,7 +3,7 @@
 
 use super::{coverage, view_residuals, Calibration};
 use crate::error::Result;
-use crate::plot::{Layer, Plot, BLACK_LINE, BLUE, GREY, VERMILLION};
+use crate::plot::{shade, Layer, Plot, BLACK_LINE, BLUE, GREY, VERMILLION};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
@@ -184,11 +184,10 @@ pub fn coverage_map(cal: &Calibration, size: [u32; 2]) -> Plot {
                         (i + 1.0) * w / gx as f64,
                         (j + 1.0) * h / gy as f64,
                     ],
-                    0.6 * cells[k] as f64 / max,
+                    shade(GREY, 0.6 * cells[k] as f64 / max),
                 )
             })
             .collect(),
-        color: GREY,
     });
     p.layers.push(Layer::Points {
         xy: corners.iter().map(|c| (c.x, c.y)).collect(),
