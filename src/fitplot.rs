@@ -307,8 +307,8 @@ fn residual_against(groups: &[Group], axis: Axis) -> Figure {
             for e in &g.spheres {
                 for i in 0..e.data.len() {
                     x.push(x_of(e, i));
-                    for c in 0..3 {
-                        r[c].push(100.0 * (e.data[i][c] - e.model[i][c]) / g.peak[c]);
+                    for (c, rc) in r.iter_mut().enumerate() {
+                        rc.push(100.0 * (e.data[i][c] - e.model[i][c]) / g.peak[c]);
                     }
                 }
             }

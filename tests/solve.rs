@@ -209,6 +209,10 @@ fn paper_baseline_and_holdout() {
     // The joint fit with the light held: the detector's light, σ0 still within 1%.
     let held = solve_with(dir, "fit-hold.json", |o| o.hold_light = true);
     assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
+    // The baseline written beside a joint fit is the paper's method's own result.
+    let b = held.baseline.as_ref().unwrap();
+    assert_eq!(&b.per_radius, pr);
+    assert!(Vector3::from(p.light_direction).angle(&b.params_for(35.0).light.direction()) < 1e-9);
     assert!(worst(&held.sigma0_mm, &t.sigma0_mm) < 0.01);
     let az = held
         .parameters
@@ -362,24 +366,144 @@ fn extensions_are_chosen_by_held_out_error() {
     assert!(plain.sigma_exponent.is_none());
 }
 
+/// A PNG's size, and whether it holds a picture: many dark pixels and many colours.
+fn png_check(path: &Path, size: Option<(u32, u32)>) {
+    let png = image::open(path).unwrap().to_rgb8();
+    if let Some(s) = size {
+        assert_eq!(png.dimensions(), s, "{}", path.display());
+    }
+    let dark = png
+        .pixels()
+        .filter(|p| p.0.iter().any(|&v| v < 128))
+        .count();
+    let colours: std::collections::HashSet<[u8; 3]> = png.pixels().map(|p| p.0).collect();
+    assert!(
+        dark > 1000 && colours.len() > 50,
+        "{}: {dark} dark pixels, {} colours",
+        path.display(),
+        colours.len()
+    );
+}
+
+fn svg_has(dir: &Path, name: &str, texts: &[&str]) {
+    let svg = std::fs::read_to_string(dir.join(format!("{name}.svg"))).unwrap();
+    for t in texts {
+        assert!(svg.contains(t), "{name}.svg lacks {t:?}");
+    }
+}
+
 #[test]
-fn figures_are_written() {
+fn figures_are_written_and_redrawn_from_fit_json() {
     let dir = default_session();
     let plots: PathBuf = dir.join("plots");
-    solve_with(dir, "fit-plots.json", |o| o.plots = Some(plots.clone()));
-    for name in ["radiance-theta", "residual-theta"] {
-        let png = image::open(plots.join(format!("{name}.png")))
-            .unwrap()
-            .to_rgb8();
-        assert_eq!(png.dimensions(), (900, 600));
-        // Not blank: some pixels far from white.
-        assert!(
-            png.pixels()
-                .filter(|p| p.0.iter().any(|&v| v < 128))
-                .count()
-                > 1000
+    let fit_path = dir.join("fit-plots.json");
+    let f = solve_with(dir, "fit-plots.json", |o| {
+        o.plots = Some(plots.clone());
+        o.holdout = Some(15.0);
+    });
+    // The baseline ran beside the joint fit.
+    assert_eq!(f.baseline.as_ref().unwrap().per_radius.len(), 4);
+    png_check(&plots.join("radiance-theta.png"), Some((1700, 1040)));
+    svg_has(
+        &plots,
+        "radiance-theta",
+        &[
+            "θ, normal to light (°)",
+            "radiance (pixel value / exposure)",
+            "r = 35 mm",
+            "r = 15 mm, held out",
+            "joint fit, mean per 1°",
+            "paper&apos;s baseline",
+            "near the terminator",
+        ],
+    );
+    for (name, axis) in [
+        ("residual-theta", "θ, normal to light (°)"),
+        ("residual-phi", "φ, normal to view (°)"),
+    ] {
+        png_check(&plots.join(format!("{name}.png")), Some((1500, 820)));
+        svg_has(
+            &plots,
+            name,
+            &[
+                axis,
+                "data − model (% of peak)",
+                "r = 20 mm",
+                "red channel, running median (3°)",
+                "blue channel, running median (3°)",
+            ],
         );
-        let svg = std::fs::read_to_string(plots.join(format!("{name}.svg"))).unwrap();
-        assert!(svg.contains("r = 35 mm") && svg.contains("θ"), "{name}");
     }
+    png_check(&plots.join("correlation.png"), None);
+    svg_has(
+        &plots,
+        "correlation",
+        &["σ0 r", "light az", "1.00", "correlation"],
+    );
+    png_check(&plots.join("holdout.png"), Some((1000, 760)));
+    svg_has(
+        &plots,
+        "holdout",
+        &[
+            "observed radiance",
+            "predicted radiance",
+            "predicted = observed",
+            "r = 15 mm",
+        ],
+    );
+    // One residual image per sphere, the photo and the map embedded as PNGs with the colour bar.
+    let mut images: Vec<String> = std::fs::read_dir(&plots)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| {
+            n.starts_with("residual-")
+                && n.ends_with(".png")
+                && !n.contains("theta")
+                && !n.contains("phi")
+        })
+        .collect();
+    images.sort();
+    assert_eq!(images.len(), 5, "{images:?}");
+    for n in &images {
+        png_check(&plots.join(n), Some((1400, 560)));
+        let stem = n.trim_end_matches(".png");
+        svg_has(&plots, stem, &["residual (% of peak)", "no data", "x (px)"]);
+        let svg = std::fs::read_to_string(plots.join(format!("{stem}.svg"))).unwrap();
+        assert_eq!(svg.matches("data:image/png;base64,").count(), 3, "{stem}");
+    }
+    let index = std::fs::read_to_string(plots.join("index.html")).unwrap();
+    for n in images.iter().map(|s| s.as_str()).chain([
+        "radiance-theta.png",
+        "residual-phi.png",
+        "correlation.png",
+        "holdout.png",
+        "sigma0_r",
+        "prior 1.45 ± 0.05",
+        "held out",
+    ]) {
+        assert!(index.contains(n), "index.html lacks {n}");
+    }
+    assert!(!index.contains("http"), "index.html links outside");
+    // Redrawn from fit.json without solving: the same pictures, byte for byte.
+    let again = dir.join("replot");
+    let files = workbench::fitplot::replot(&fit_path, &again, true).unwrap();
+    for file in files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+    {
+        let name = file.file_name().unwrap();
+        assert_eq!(
+            std::fs::read(file).unwrap(),
+            std::fs::read(plots.join(name)).unwrap(),
+            "{name:?} differs"
+        );
+    }
+    // A fit.json that is not one: refused with the file named.
+    let bad = dir.join("not-a-fit.json");
+    std::fs::write(&bad, r#"{"schema": "workbench.fit/0"}"#).unwrap();
+    let e = workbench::fitplot::replot(&bad, &dir.join("never"), true)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not-a-fit.json") && !e.contains('\n'), "{e}");
+    assert!(!dir.join("never").exists());
 }

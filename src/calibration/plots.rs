@@ -3,7 +3,7 @@
 
 use super::{coverage, view_residuals, Calibration};
 use crate::error::Result;
-use crate::plot::{shade, Layer, Plot, BLACK_LINE, BLUE, GREY, VERMILLION};
+use crate::plot::{shade, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREY, VERMILLION};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
@@ -81,13 +81,14 @@ pub fn per_view_errors(cal: &Calibration) -> Plot {
             label: Some("outlier limit".into()),
         });
     }
+    p.layers.push(Layer::Key {
+        swatch: Swatch::Box(BLUE),
+        label: "view used".into(),
+    });
     if !cal.rejected.is_empty() {
-        // A legend entry for the rejected colour.
-        p.layers.push(Layer::Points {
-            xy: vec![],
-            color: VERMILLION,
-            size: 5,
-            label: Some("rejected view".into()),
+        p.layers.push(Layer::Key {
+            swatch: Swatch::Box(VERMILLION),
+            label: "view rejected".into(),
         });
     }
     p
@@ -130,6 +131,7 @@ pub fn residual_scatter(cal: &Calibration, object: &[Vector3<f64>]) -> Plot {
     p.x_range = Some((-lim, lim));
     p.y_range = Some((-lim, lim));
     p.y_down = true;
+    p.equal_aspect = true;
     p.layers.push(Layer::Points {
         xy,
         color: BLUE,
@@ -173,6 +175,7 @@ pub fn coverage_map(cal: &Calibration, size: [u32; 2]) -> Plot {
     p.x_range = Some((0.0, w));
     p.y_range = Some((0.0, h));
     p.y_down = true;
+    p.equal_aspect = true;
     p.layers.push(Layer::Cells {
         cells: (0..gx * gy)
             .map(|k| {
@@ -188,6 +191,13 @@ pub fn coverage_map(cal: &Calibration, size: [u32; 2]) -> Plot {
                 )
             })
             .collect(),
+    });
+    p.layers.push(Layer::Line {
+        xy: vec![(0.0, 0.0), (w, 0.0), (w, h), (0.0, h), (0.0, 0.0)],
+        color: BLACK_LINE,
+        width: 1,
+        dashed: false,
+        label: Some("frame".into()),
     });
     p.layers.push(Layer::Points {
         xy: corners.iter().map(|c| (c.x, c.y)).collect(),
