@@ -285,6 +285,9 @@ fn radiance_theta(groups: &[Group], fitted: &str, baseline: bool) -> Figure {
     }
 }
 
+/// The residual-against-φ figure shows pixels with θ below this (degrees).
+const LIT_DEG: f64 = 85.0;
+
 #[derive(Clone, Copy, PartialEq)]
 enum Axis {
     Theta,
@@ -305,7 +308,9 @@ fn residual_against(groups: &[Group], axis: Axis) -> Figure {
             let mut x = vec![];
             let mut r: [Vec<f64>; 3] = Default::default();
             for e in &g.spheres {
-                for i in 0..e.data.len() {
+                // Against φ only the lit pixels: the dark side's zeros would pin the medians.
+                for i in (0..e.data.len()).filter(|&i| axis == Axis::Theta || e.theta[i] < LIT_DEG)
+                {
                     x.push(x_of(e, i));
                     for (c, rc) in r.iter_mut().enumerate() {
                         rc.push(100.0 * (e.data[i][c] - e.model[i][c]) / g.peak[c]);
@@ -331,10 +336,17 @@ fn residual_against(groups: &[Group], axis: Axis) -> Figure {
         .fold(0.1, f64::max)
         * 1.1;
     let (name, label) = match axis {
-        Axis::Theta => ("θ", "θ, normal to light (°)"),
-        Axis::Phi => ("φ", "φ, normal to view (°)"),
+        Axis::Theta => ("θ".to_string(), "θ, normal to light (°)"),
+        Axis::Phi => (
+            format!("φ (lit pixels, θ < {LIT_DEG}°)"),
+            "φ, normal to view (°)",
+        ),
     };
-    let cols = groups.len().clamp(1, 3);
+    let cols = if groups.len() == 4 {
+        2
+    } else {
+        groups.len().clamp(1, 3)
+    };
     let mut rows = vec![];
     for (k, g) in groups.iter().enumerate() {
         let (x, r) = &series[k];
@@ -454,7 +466,14 @@ fn residual_image(g: &Group, e: &Evaluated) -> Option<Figure> {
         });
         p
     };
-    let photo = panel("photo", crop.rgb.clone());
+    let photo = panel(
+        &if crop.gain > 1.0 {
+            format!("photo (brightened ×{:.1})", crop.gain)
+        } else {
+            "photo".to_string()
+        },
+        crop.rgb.clone(),
+    );
     let mut res = panel("data − model, mean of r, g, b (% of peak)", rgb);
     res.y_label = String::new();
     res.layers.push(Layer::Key {
@@ -568,7 +587,11 @@ fn holdout(fit: &FitFile, g: &Group) -> Figure {
             xy: d.iter().step_by(k).cloned().collect(),
             color: CHANNEL_COLORS[c],
             size: 2,
-            label: Some(format!("{} channel (1 in {k} pixels)", CHANNELS[c])),
+            label: Some(if k == 1 {
+                format!("{} channel, all {} pixels", CHANNELS[c], d.len())
+            } else {
+                format!("{} channel, 1 in {k} pixels", CHANNELS[c])
+            }),
         });
     }
     let lo = -0.03 * top;
@@ -665,7 +688,7 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
         },
         Named {
             name: "residual-phi".into(),
-            caption: "Data − model against φ (normal to view): Fresnel and specular misfit shows here.".into(),
+            caption: format!("Data − model against φ (normal to view) for the lit pixels (θ < {LIT_DEG}°): Fresnel and specular misfit shows here."),
             figure: residual_against(&groups, Axis::Phi),
         },
     ];

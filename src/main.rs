@@ -103,9 +103,12 @@ struct SolveArgs {
     /// Keep the light at the detector's estimate (or --start-light) instead of refining it.
     #[arg(long)]
     hold_light: bool,
-    /// Write figures (PNG and SVG) into this folder.
+    /// Write figures (PNG and SVG) and index.html into this folder; runs --baseline too.
     #[arg(long)]
     plots: Option<PathBuf>,
+    /// Also run the paper's baseline beside the joint fit (written to fit.json as "baseline").
+    #[arg(long)]
+    baseline: bool,
 }
 
 #[derive(Args)]
@@ -755,6 +758,7 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
     o.redetect = a.redetect;
     o.hold_light = a.hold_light;
     o.plots = a.plots.clone();
+    o.baseline = a.baseline;
     o.quiet = quiet;
     let f = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;
     print!("{}", solve::summary(&f));

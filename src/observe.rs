@@ -53,7 +53,9 @@ pub struct SphereData {
 }
 
 /// A display copy of the photo around a sphere: sRGB 8-bit means of `step` × `step` pixel blocks,
-/// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across.
+/// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across. A dark
+/// crop (99th percentile below 0.45 of full scale) is brightened by `gain` (at most 8) so that its
+/// 99th percentile shows at 0.9.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Crop {
     pub x0: u32,
@@ -62,6 +64,7 @@ pub struct Crop {
     pub width: u32,
     pub height: u32,
     pub rgb: Vec<u8>,
+    pub gain: f64,
 }
 
 impl Crop {
@@ -83,7 +86,7 @@ impl Crop {
             .max(1);
         let width = (x1 - x0 + 1).div_ceil(step);
         let height = (y1 - y0 + 1).div_ceil(step);
-        let mut rgb = Vec::with_capacity((3 * width * height) as usize);
+        let mut lin = Vec::with_capacity((3 * width * height) as usize);
         for j in 0..height {
             for i in 0..width {
                 let mut sum = [0.0f64; 3];
@@ -97,9 +100,24 @@ impl Crop {
                         n += 1.0;
                     }
                 }
-                rgb.extend(sum.map(|s| (255.0 * crate::photo::srgb_encode(s / n)).round() as u8));
+                lin.extend(sum.map(|s| s / n));
             }
         }
+        let mut sorted = lin.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let p99 = sorted
+            .get((sorted.len() as f64 * 0.99) as usize)
+            .copied()
+            .unwrap_or(1.0);
+        let gain = if p99 > 0.0 && p99 < 0.45 {
+            (0.9 / p99).min(8.0)
+        } else {
+            1.0
+        };
+        let rgb = lin
+            .iter()
+            .map(|v| (255.0 * crate::photo::srgb_encode(gain * v)).round() as u8)
+            .collect();
         Crop {
             x0,
             y0,
@@ -107,6 +125,7 @@ impl Crop {
             width,
             height,
             rgb,
+            gain,
         }
     }
 

@@ -62,6 +62,8 @@ pub struct Options {
     /// Keep the light at the detector's estimate.
     pub hold_light: bool,
     pub plots: Option<PathBuf>,
+    /// Run the paper's baseline beside a joint fit (also when `plots` is set: its curves are drawn).
+    pub baseline: bool,
     pub quiet: bool,
 }
 
@@ -82,6 +84,7 @@ impl Options {
             redetect: false,
             hold_light: false,
             plots: None,
+            baseline: false,
             quiet: true,
         }
     }
@@ -694,8 +697,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
             };
             let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
-            // The paper's baseline beside it, for the figures and a comparison (cheap: 1° cells).
-            if let Some(light) = l.light {
+            // The paper's baseline beside it, for the figures and a comparison.
+            let want = opts.baseline || opts.plots.is_some();
+            if let (true, Some(light)) = (want, l.light) {
                 let t = Instant::now();
                 let pf = paper::fit(&fitted, &light, l.highlight_radius, opts.eta_prior.0);
                 let a = LightAngles::from_direction(&light);
@@ -1083,6 +1087,13 @@ pub fn summary(f: &FitFile) -> String {
                 r.sigma0_mm[2]
             );
         }
+    }
+    if let Some(b) = &f.baseline {
+        let _ = writeln!(
+            s,
+            "baseline paper's method: σ0 {:.4}, {:.4}, {:.4} mm (detector's light, η = {} divided out, peak masked; {:.2} s)",
+            b.sigma0_mm[0], b.sigma0_mm[1], b.sigma0_mm[2], b.eta, b.seconds
+        );
     }
     let _ = writeln!(
         s,

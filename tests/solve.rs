@@ -207,7 +207,10 @@ fn paper_baseline_and_holdout() {
     let dl = Vector3::from(d.light_direction.unwrap());
     assert!(Vector3::from(p.light_direction).angle(&dl) < 1e-9);
     // The joint fit with the light held: the detector's light, σ0 still within 1%.
-    let held = solve_with(dir, "fit-hold.json", |o| o.hold_light = true);
+    let held = solve_with(dir, "fit-hold.json", |o| {
+        o.hold_light = true;
+        o.baseline = true;
+    });
     assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
     // The baseline written beside a joint fit is the paper's method's own result.
     let b = held.baseline.as_ref().unwrap();
@@ -222,6 +225,8 @@ fn paper_baseline_and_holdout() {
     assert_eq!(az.status, "fixed: from the detector");
     // Holdout: fit without the 15 mm sphere, predict it.
     let h = solve_with(dir, "fit-holdout.json", |o| o.holdout = Some(15.0));
+    // Without --baseline or --plots the baseline is not run.
+    assert!(h.baseline.is_none());
     let ho = h.holdout.as_ref().unwrap();
     let fitted: Vec<f64> = h
         .rmse
