@@ -803,7 +803,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 std: pf.std,
                 status,
                 free,
-                correlation: nalgebra::DMatrix::identity(6, 6),
+                // Separate fits per radius: no joint covariance to report.
+                correlation: nalgebra::DMatrix::zeros(0, 0),
                 specular: false,
                 extensions: Extensions::default(),
                 reduction: None,
