@@ -324,4 +324,22 @@ fn solve_writes_fit_json_and_refuses_bad_options() {
     );
     assert!(!nope.exists());
     assert_clean_failure(&["solve", "/nonexistent/session"], "/nonexistent/session");
+    // `workbench plot` redraws the figures from fit.json (default: plots/ beside it).
+    let (code, stdout, err) = wb(&["--quiet", "plot", f]);
+    assert_eq!(code, 0, "{err}");
+    let plots = dir.path().join("plots");
+    assert!(stdout.contains("index.html"), "{stdout}");
+    for name in [
+        "index.html",
+        "radiance-theta.png",
+        "residual-phi.svg",
+        "correlation.png",
+        "residual-row-1.png",
+        "residual-row-2.svg",
+    ] {
+        assert!(plots.join(name).is_file(), "{name}");
+    }
+    assert_clean_failure(&["plot", nope.to_str().unwrap()], "nope.json");
+    std::fs::write(&nope, "{ not json").unwrap();
+    assert_clean_failure(&["plot", nope.to_str().unwrap()], "nope.json");
 }
