@@ -623,6 +623,112 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         }
     }
     let fit = fit.expect("the loop ends with a fit");
+    // σ0 at the edges of what the data resolve, where the linearised standard error means
+    // nothing: compare with σ0 → 0 or → ∞ (profile likelihood).
+    let (r_min, r_max) = spheres.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
+        (a.min(s.radius_mm), b.max(s.radius_mm))
+    });
+    let mut limits = resolution_limits(model, &final_obs, &fit, &priors, r_min, r_max);
+    // Below a pixel: the blur σ = σ0/r is smaller than one pixel's angle on the sphere (1/R for a
+    // sphere R pixels in radius) on every sphere, so the pixels' own footprint hides it.
+    for c in 0..3 {
+        let s0 = fit.params.material.sigma0_mm[c];
+        let finest = spheres
+            .iter()
+            .filter(|s| s.pixels > 0)
+            .map(|s| (s0 / s.radius_mm) * (s.pixels as f64 / std::f64::consts::PI).sqrt())
+            .fold(0.0, f64::max);
+        if fit.free[idx::SIGMA0 + c] && finest < 1.0 && !limits.iter().any(|l| l.0 == c) {
+            limits.push((c, Bound::Pixel(finest)));
+        }
+    }
+    for (c, bound) in limits {
+        let v = fit.params.material.sigma0_mm[c];
+        let (what, test) = match bound {
+            Bound::Pixel(f) => (
+                format!("upper bound: the blur is {f:.2} of a pixel's angle"),
+                format!("its blur σ0/r is {f:.2} of a pixel's angle on the sphere or less"),
+            ),
+            Bound::Zero(d) => (
+                format!("upper bound: σ0 → 0 fits as well (Δχ² = {d:.2})"),
+                format!("σ0 → 0 fits as well (Δχ² = {d:.2} < {RESOLVED_CHI2})"),
+            ),
+            Bound::Infinite(d) => (
+                format!("lower bound: σ0 → ∞ fits as well (Δχ² = {d:.2})"),
+                format!("σ0 → ∞, a uniform glow, fits as well (Δχ² = {d:.2} < {RESOLVED_CHI2})"),
+            ),
+        };
+        status[idx::SIGMA0 + c] = what;
+        notes.push(format!(
+            "{} = {v:.4} mm is beyond what the data resolve: {test} (radii {r_min}–{r_max} mm); the value is a bound, not a measurement",
+            PARAM_NAMES[idx::SIGMA0 + c]
+        ));
+    }
+    let (clipped, on) = spheres
+        .iter()
+        .fold((0, 0), |(c, n), s| (c + s.saturated, n + s.pixels));
+    if on > 0 && clipped as f64 > CLIPPED_WARN * on as f64 {
+        notes.push(format!(
+            "{:.0}% of the sphere pixels are clipped: the fit rests on the rest (near the terminator), where σ0, the albedo and the light trade off — expect biases of several percent; lower the exposure",
+            100.0 * clipped as f64 / on as f64
+        ));
+    }
+    // A fit whose core parameters have no finite standard error is degenerate, whatever the
+    // optimiser's stopping test said: not a measurement.
+    let mut fit = fit;
+    let core = (0..6).chain([idx::AZIMUTH, idx::ELEVATION]);
+    let singular: Vec<&str> = core
+        .filter(|&k| fit.free[k] && !fit.std[k].is_finite())
+        .map(|k| PARAM_NAMES[k])
+        .collect();
+    if !singular.is_empty() && fit.converged {
+        fit.converged = false;
+        fit.termination = format!(
+            "degenerate: no finite standard error for {}",
+            singular.join(", ")
+        );
+        if let Some(st) = stages.last_mut() {
+            st.converged = false;
+            st.termination = fit.termination.clone();
+        }
+        notes.push(format!(
+            "the fit is degenerate (the covariance is singular for {}): the result is not a measurement — check the detections and the photos' noise and exposure",
+            singular.join(", ")
+        ));
+    }
+    // Goodness of fit against the measured noise (weights are 1/σ per pixel and channel).
+    let dof = fit
+        .residuals
+        .saturating_sub(fit.free.iter().filter(|f| **f).count())
+        .max(1);
+    let chi2 = 2.0 * fit.cost / dof as f64;
+    if chi2 > CHI2_WARN {
+        notes.push(format!(
+            "the residuals are {:.1}× the measured noise (χ²/dof = {chi2:.1}): the model does not describe these photos fully — check the detections (light, outlines); a wrong light or outline biases σ0",
+            chi2.sqrt()
+        ));
+    }
+    // A light beside the camera: θ ≈ φ everywhere, the blur and the exit transmission trade off.
+    let view: Vector3<f64> = spheres
+        .iter()
+        .filter_map(|s| s.obs.first())
+        .map(|o| o.geometry.view)
+        .sum();
+    if view.norm() > 0.0 {
+        let a = fit.params.light.direction().angle(&view).to_degrees();
+        if a < NEAR_VIEW_DEG {
+            notes.push(format!(
+                "the light is {a:.1}° from the camera's direction: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
+            ));
+        }
+    }
+    let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
+    if status[idx::ETA].starts_with("prior") && tension > 3.0 {
+        notes.push(format!(
+            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim disagrees with the data; measure η with --irradiance",
+            fit.params.material.eta
+        ));
+    }
     if status[idx::ETA].starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
         notes.push(format!(
             "η = {:.4} ± {:.4}: the data, through the exit transmission T(φ), determine η better than its prior (± {eta_std}); that rests on the model's silhouette fall-off",
@@ -635,6 +741,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         }
     }
     lap("joint stage", &mut phases);
+    // Each note once (the identifiability rounds repeat theirs).
+    let mut seen = std::collections::HashSet::new();
+    notes.retain(|n| seen.insert(n.clone()));
     JointFit {
         phases,
         fit,
@@ -648,6 +757,84 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         status,
         specular,
     }
+}
+
+/// A light closer than this to the viewing direction (degrees) gets a note: θ ≈ φ.
+pub const NEAR_VIEW_DEG: f64 = 15.0;
+/// Above this χ²/dof (residuals twice the measured noise) the fit warns.
+pub const CHI2_WARN: f64 = 4.0;
+/// Above this fraction of clipped sphere pixels the fit warns.
+pub const CLIPPED_WARN: f64 = 0.5;
+
+/// Δχ² below which σ0 → 0 or → ∞ counts as fitting the data as well (3σ for one parameter).
+pub const RESOLVED_CHI2: f64 = 9.0;
+/// σ = σ0/r below this at the largest radius, or above this at the smallest, is checked against
+/// the limits (radians).
+const SIGMA_CHECK: (f64, f64) = (0.05, 1.5);
+
+/// Which end of the scale a channel's σ0 cannot be told from, with its Δχ².
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Bound {
+    /// σ0/r below a pixel's angle on every sphere (the largest fraction).
+    Pixel(f64),
+    Zero(f64),
+    Infinite(f64),
+}
+
+/// Channels whose σ0 the data cannot tell from 0 or ∞: for each channel with σ0/r_max small or
+/// σ0/r_min large, the fit is repeated (plain least squares) with that σ0 held at 10⁻⁶ mm or
+/// 10⁶ mm, and the cost compared with the free refit's in units of the residual variance.
+fn resolution_limits(
+    model: Model,
+    obs: &[Obs],
+    fit: &Fit,
+    priors: &[Prior],
+    r_min: f64,
+    r_max: f64,
+) -> Vec<(usize, Bound)> {
+    let s0 = fit.params.material.sigma0_mm;
+    let suspects: Vec<(usize, bool)> = (0..3)
+        .filter_map(|c| {
+            if !fit.free[idx::SIGMA0 + c] {
+                None
+            } else if s0[c] / r_max < SIGMA_CHECK.0 {
+                Some((c, true))
+            } else if s0[c] / r_min > SIGMA_CHECK.1 {
+                Some((c, false))
+            } else {
+                None
+            }
+        })
+        .collect();
+    if suspects.is_empty() {
+        return vec![];
+    }
+    let free_fit = solver::fit(model, obs, &fit.params, fit.free, priors);
+    let n = fit.free.iter().filter(|f| **f).count();
+    let dof = free_fit.residuals.saturating_sub(n).max(1) as f64;
+    let var = 2.0 * free_fit.cost / dof;
+    if !(var.is_finite() && var > 0.0) {
+        return vec![];
+    }
+    suspects
+        .into_iter()
+        .filter_map(|(c, small)| {
+            let mut p = free_fit.params;
+            p.material.sigma0_mm[c] = if small { 1e-6 } else { 1e6 };
+            let mut free = fit.free;
+            free[idx::SIGMA0 + c] = false;
+            let held = solver::fit(model, obs, &p, free, priors);
+            let d = 2.0 * (held.cost - free_fit.cost) / var;
+            (d < RESOLVED_CHI2).then_some((
+                c,
+                if small {
+                    Bound::Zero(d.max(0.0))
+                } else {
+                    Bound::Infinite(d.max(0.0))
+                },
+            ))
+        })
+        .collect()
 }
 
 /// Free parameters the data leave undetermined: a standard error that is not finite, or larger

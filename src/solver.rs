@@ -34,12 +34,17 @@ pub fn from_unbounded(u: &[f64; N_PARAMS]) -> ([f64; N_PARAMS], [f64; N_PARAMS])
     let mut p = *u;
     let mut d = [1.0; N_PARAMS];
     for k in 0..9 {
-        let e = u[k].exp();
+        // Clamped: a degenerate fit that runs off to ±∞ stays finite (and is flagged by its
+        // standard errors) instead of overflowing.
+        let e = u[k].clamp(-MAP_LIMIT, MAP_LIMIT).exp();
         p[k] = if k == 6 { 1.0 + e } else { e };
-        d[k] = e;
+        d[k] = if u[k].abs() < MAP_LIMIT { e } else { 0.0 };
     }
     (p, d)
 }
+
+/// Bound of the unbounded (log) coordinates: e^±60 ≈ 10^±26.
+pub const MAP_LIMIT: f64 = 60.0;
 
 /// A Gaussian prior on one parameter (physical units).
 #[derive(Clone, Copy, Debug, PartialEq)]
