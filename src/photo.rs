@@ -290,6 +290,49 @@ pub fn load_gray8(path: &Path) -> Result<Gray8> {
     })
 }
 
+/// The largest photo read (pixels): 64 MP, above any sensor in common use for this work; a
+/// larger image is refused before decoding (it would need more than 64 · 10⁶ · 12 bytes of
+/// linear RGB).
+pub const MAX_PIXELS: u64 = 64_000_000;
+/// The smallest photo side that can hold a sphere worth fitting (pixels).
+pub const MIN_SIDE: u32 = 32;
+
+/// Refuse images too large to decode or too small to hold a sphere.
+pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
+    let n = width as u64 * height as u64;
+    if n > MAX_PIXELS {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "image is {width}×{height} ({:.1} MP), more than the {} MP workbench reads: downsample it",
+                n as f64 / 1e6,
+                MAX_PIXELS / 1_000_000
+            ),
+        ));
+    }
+    if width < MIN_SIDE || height < MIN_SIDE {
+        return Err(Error::invalid(
+            path,
+            format!("image is {width}×{height}: too small to hold a sphere (at least {MIN_SIDE}×{MIN_SIDE})"),
+        ));
+    }
+    Ok(())
+}
+
+/// A JPEG cut short decodes without complaint (the missing rows grey): refuse one whose last scan
+/// (the last SOS marker, after any EXIF thumbnail's) has no end-of-image marker after it.
+fn check_jpeg_end(path: &Path) -> Result<()> {
+    let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let last = |m: u8| b.windows(2).rposition(|w| w[0] == 0xFF && w[1] == m);
+    match (last(0xDA), last(0xD9)) {
+        (Some(sos), Some(eoi)) if eoi > sos => Ok(()),
+        _ => Err(Error::invalid(
+            path,
+            "truncated JPEG: no end-of-image marker after the last scan",
+        )),
+    }
+}
+
 /// Decode a JPEG, PNG or TIFF file with its EXIF orientation applied.
 fn decode_oriented(path: &Path) -> Result<image::DynamicImage> {
     use image::ImageDecoder;
@@ -300,7 +343,15 @@ fn decode_oriented(path: &Path) -> Result<image::DynamicImage> {
     if reader.format().is_none() {
         return Err(Error::invalid(path, "not a JPEG, PNG or TIFF image"));
     }
+    if reader.format() == Some(image::ImageFormat::Jpeg) {
+        check_jpeg_end(path)?;
+    }
     let mut dec = reader.into_decoder().map_err(|e| image_err(path, e))?;
+    let (w, h) = dec.dimensions();
+    if w as u64 * h as u64 > MAX_PIXELS {
+        // Only the upper limit here: small calibration views are judged by their corners.
+        check_size(path, w, h)?;
+    }
     let orientation = dec.orientation().map_err(|e| image_err(path, e))?;
     let mut img = image::DynamicImage::from_decoder(dec).map_err(|e| image_err(path, e))?;
     img.apply_orientation(orientation);

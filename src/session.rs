@@ -9,11 +9,13 @@ use std::path::{Path, PathBuf};
 pub const SCHEMA: &str = "workbench.session/1";
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SessionSphere {
     pub radius_mm: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SessionImage {
     pub file: String,
     /// Spheres in the photo, left to right.
@@ -36,6 +38,7 @@ pub enum LightMode {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Session {
     pub schema: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -77,6 +80,12 @@ impl Session {
             if im.file.trim().is_empty() {
                 return bad(format!("images[{i}] has an empty file name"));
             }
+            if !inside(&im.file) {
+                return bad(format!(
+                    "images[{i}] ({}) lies outside the session folder: photos must be in it or below it",
+                    im.file
+                ));
+            }
             if im.spheres.is_empty() {
                 return bad(format!("images[{i}] ({}) lists no spheres", im.file));
             }
@@ -89,9 +98,9 @@ impl Session {
                 }
             }
             if let Some(e) = im.exposure {
-                if !(e.is_finite() && e > 0.0) {
+                if !(e.is_finite() && e > 1e-9 && e < 1e9) {
                     return bad(format!(
-                        "images[{i}] ({}): exposure must be positive, got {e}",
+                        "images[{i}] ({}): exposure must lie between 1e-9 and 1e9, got {e:e}",
                         im.file
                     ));
                 }
@@ -109,6 +118,27 @@ impl Session {
             session_file.parent().unwrap_or(Path::new(".")).join(p)
         }
     }
+}
+
+/// Whether a path written in session.json stays inside the session folder: relative, and never
+/// climbing above its start with `..`.
+fn inside(p: &str) -> bool {
+    use std::path::Component;
+    let mut depth = 0i32;
+    for c in Path::new(p).components() {
+        match c {
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+            Component::ParentDir => {
+                depth -= 1;
+                if depth < 0 {
+                    return false;
+                }
+            }
+            Component::RootDir | Component::Prefix(_) => return false,
+        }
+    }
+    true
 }
 
 /// How a photo's pixel values are to be normalised, as found by [`inspect`].
@@ -163,6 +193,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             err: e,
         })?;
         let (width, height) = dec.dimensions();
+        crate::photo::check_size(&p, width, height)?;
         let ct = dec.color_type();
         let channels = ct.channel_count();
         let bits = ct.bytes_per_pixel() / channels * 8;

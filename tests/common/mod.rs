@@ -103,11 +103,16 @@ pub fn diligent_session(
             [v[0], -v[1], -v[2]]
         })
         .collect();
+    // Photos must lie in the session folder: links to the shared files, not copies.
+    for n in &names {
+        let from = std::fs::canonicalize(ball.join(n)).unwrap();
+        std::os::unix::fs::symlink(from, dir.join(n)).unwrap();
+    }
     let session = serde_json::json!({
         "schema": "workbench.session/1",
         "light": "per-image",
         "images": names.iter().map(|n| serde_json::json!({
-            "file": ball.join(n).display().to_string(), "spheres": [{"radius_mm": 20.0}]
+            "file": n, "spheres": [{"radius_mm": 20.0}]
         })).collect::<Vec<_>>()
     });
     std::fs::write(dir.join("session.json"), session.to_string()).unwrap();
