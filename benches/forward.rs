@@ -105,5 +105,54 @@ fn bench_synth(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_kernels, bench_synth);
+/// The solver's hot kernel: model + gradient for every observation, accumulated into JᵀJ and Jᵀr
+/// (what one Levenberg–Marquardt evaluation costs), on one core and on all cores.
+fn bench_normal_equations(c: &mut Criterion) {
+    use workbench::solver::{to_unbounded, Obs, Problem};
+    let n = 100_000;
+    let model = Model::default();
+    let p = SessionConfig::default();
+    let params = Params {
+        material: p.material,
+        light: LightAngles {
+            azimuth: 1.2,
+            elevation: 0.35,
+        },
+    };
+    let obs: Vec<Obs> = samples(n)
+        .into_iter()
+        .map(|g| Obs {
+            radiance: model.radiance(&params, &g),
+            geometry: g,
+            weight: [1.0; 3],
+        })
+        .collect();
+    let mut free = [true; workbench::model::N_PARAMS];
+    free[workbench::model::idx::SIGMA_EXPONENT] = false;
+    free[workbench::model::idx::ALBEDO_CURVATURE] = false;
+    let problem = Problem {
+        model,
+        obs: &obs,
+        free,
+        u: to_unbounded(&params.to_vec()),
+        priors: vec![],
+        history: None,
+    };
+    let mut g = c.benchmark_group("normal_equations_100k");
+    g.throughput(Throughput::Elements(n as u64));
+    g.sample_size(20);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    for threads in [1, cores] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        g.bench_function(format!("{threads}_threads"), |b| {
+            b.iter(|| pool.install(|| black_box(problem.normal_equations())))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench_kernels, bench_synth, bench_normal_equations);
 criterion_main!(benches);

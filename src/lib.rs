@@ -7,6 +7,7 @@
 // `!(x > 0.0)` is how the argument checks reject NaN along with the out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bench;
 pub mod calibration;
 pub mod camera;
 pub mod cdrf;

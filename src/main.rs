@@ -36,6 +36,8 @@ enum Command {
     Detect(DetectArgs),
     /// Fit the material (σ0, albedo, η, specular lobe, light) to a session; write fit.json.
     Solve(SolveArgs),
+    /// Time and error of every stage at every setting, on freshly rendered ground truth.
+    Bench(BenchArgs),
     /// Redraw a fit's figures and index.html from fit.json and its session, without solving.
     Plot(PlotArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
@@ -109,6 +111,16 @@ struct SolveArgs {
     /// Also run the paper's baseline beside the joint fit (written to fit.json as "baseline").
     #[arg(long)]
     baseline: bool,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Two small sessions and a small checkerboard set (a few minutes) instead of the full run.
+    #[arg(long)]
+    quick: bool,
+    /// Folder for the sessions and the report (default: bench-report/).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -783,6 +795,20 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+fn bench(a: BenchArgs, quiet: bool) -> Result<()> {
+    use workbench::bench;
+    let out = a.out.unwrap_or_else(bench::default_out);
+    let r = bench::run(&bench::BenchOptions {
+        out: out.clone(),
+        quick: a.quick,
+        quiet,
+    })
+    .with_context(|| format!("bench into {}", out.display()))?;
+    print!("{}", bench::markdown(&r));
+    println!("wrote    {}", out.join("report.md").display());
+    Ok(())
+}
+
 fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
     let out = a.out.clone().unwrap_or_else(|| {
         a.fit
@@ -875,6 +901,7 @@ fn main() {
         Command::Detect(a) => detect(a, cli.quiet),
         Command::Solve(a) => solve(a, cli.quiet),
         Command::Plot(a) => plot(a, cli.quiet),
+        Command::Bench(a) => bench(a, cli.quiet),
         Command::Check { session } => check(session),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate(a, cli.quiet),

@@ -1,0 +1,416 @@
+//! `workbench bench`: run time against error for every stage, regenerated from ground truth on
+//! every run. Synthetic sessions (several noise levels and sizes, PNG and JPEG) and a checkerboard
+//! set are rendered with known parameters; then calibration (each corner detector), detection and
+//! the joint solve at every reduction level are timed and compared with the truth. The report
+//! (`report.md`, `report.json` with schema `workbench.bench/1`, and `error-vs-time.{png,svg}`)
+//! gives each setting's time and error and the solve stage's time against decoding the photos,
+//! both measured in the same run.
+
+use crate::detect;
+use crate::error::{Error, Result};
+use crate::joint::Reduction;
+use crate::plot::{Layer, Plot, PALETTE};
+use crate::solve::{self, Options};
+use crate::synth::session::{self, Format, SessionConfig, SessionTruth};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+pub const SCHEMA: &str = "workbench.bench/1";
+
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub out: PathBuf,
+    /// A few minutes: two small sessions and a small checkerboard set.
+    pub quick: bool,
+    pub quiet: bool,
+}
+
+/// One measured setting.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    pub stage: String,
+    pub data: String,
+    pub setting: String,
+    pub seconds: f64,
+    /// The error against the truth, in `error_unit`.
+    pub error: f64,
+    pub error_unit: String,
+    /// A second error where the stage has one (the light's, degrees).
+    pub light_error_deg: Option<f64>,
+    /// For the solve: decoding the photos in the same run (seconds), and observations fitted.
+    pub decode_s: Option<f64>,
+    pub observations: Option<usize>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchReport {
+    pub schema: String,
+    pub quick: bool,
+    pub machine: String,
+    pub rows: Vec<Row>,
+    pub total_s: f64,
+}
+
+/// A synthetic session of the benchmark.
+struct Data {
+    name: String,
+    size: [u32; 2],
+    noise: f64,
+    format: Format,
+}
+
+fn sessions(quick: bool) -> Vec<Data> {
+    let d = |size: [u32; 2], noise: f64, format: Format| Data {
+        name: format!(
+            "{}×{} {}% {}",
+            size[0],
+            size[1],
+            noise * 100.0,
+            match format {
+                Format::Png16 => "PNG",
+                Format::Jpeg => "JPEG",
+            }
+        ),
+        size,
+        noise,
+        format,
+    };
+    let mut v = vec![
+        d([640, 480], 0.01, Format::Png16),
+        d([640, 480], 0.05, Format::Png16),
+    ];
+    if !quick {
+        v.push(d([1280, 960], 0.01, Format::Png16));
+        v.push(d([1280, 960], 0.05, Format::Jpeg));
+    }
+    v
+}
+
+fn config(d: &Data) -> SessionConfig {
+    let mut cam = session::default_camera();
+    let s = d.size[0] as f64 / 1280.0;
+    cam.fx *= s;
+    cam.fy *= s;
+    cam.cx = d.size[0] as f64 / 2.0 + 3.2 * s;
+    cam.cy = d.size[1] as f64 / 2.0 - 1.5 * s;
+    cam.image_size = d.size;
+    SessionConfig {
+        camera: cam,
+        noise: d.noise,
+        format: d.format,
+        ..SessionConfig::default()
+    }
+}
+
+/// The reduction settings the solve offers, every-pixel first.
+pub fn reductions() -> Vec<(String, Reduction)> {
+    let mut v = vec![("every pixel".to_string(), Reduction::None)];
+    for f in [1u32, 2, 4, 8, 16] {
+        v.push((format!("{}° cells", f as f64 * 0.25), Reduction::Factor(f)));
+    }
+    v.push(("auto".to_string(), Reduction::Auto));
+    v
+}
+
+fn machine() -> String {
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    format!("{cpu}, {cores} cores")
+}
+
+/// Run the benchmark and write its report into `opts.out`.
+pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    let data = sessions(opts.quick);
+    let settings = reductions();
+    let steps = data.len() * (2 + settings.len()) + 1;
+    let pb = crate::progress::bar(steps as u64, "bench", opts.quiet);
+    let mut rows = vec![];
+    #[cfg(feature = "opencv")]
+    {
+        rows.extend(calibration_rows(opts)?);
+    }
+    pb.inc(1);
+    for d in &data {
+        let dir = opts.out.join("sessions").join(
+            d.name
+                .replace(['×', ' '], "-")
+                .replace('%', "pc")
+                .to_lowercase(),
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        session::generate(&config(d), &dir, None, true)?;
+        let truth: SessionTruth = crate::output::read_json(&dir.join("truth.json"))?;
+        pb.inc(1);
+        let t = Instant::now();
+        let det = detect::run(&detect::Options {
+            session: dir.clone(),
+            out: None,
+            overlays: false,
+            quiet: true,
+        })?;
+        let light = det.light_direction.map(Vector3::from);
+        rows.push(Row {
+            stage: "detection".into(),
+            data: d.name.clone(),
+            setting: "default".into(),
+            seconds: t.elapsed().as_secs_f64(),
+            error: light.map_or(f64::NAN, |l| {
+                l.angle(&Vector3::from(truth.light_direction)).to_degrees()
+            }),
+            error_unit: "light °".into(),
+            light_error_deg: None,
+            decode_s: None,
+            observations: None,
+        });
+        pb.inc(1);
+        for (name, reduction) in &settings {
+            let mut o = Options::new(&dir);
+            o.out = Some(dir.join(format!("fit-{}.json", name.replace([' ', '°', '.'], ""))));
+            o.reduction = *reduction;
+            let f = solve::run(&o)?;
+            let err = (0..3)
+                .map(|c| (f.sigma0_mm[c] - truth.sigma0_mm[c]).abs() / truth.sigma0_mm[c])
+                .fold(0.0, f64::max);
+            rows.push(Row {
+                stage: "solve".into(),
+                data: d.name.clone(),
+                setting: name.clone(),
+                seconds: f.timings.solve_s,
+                error: 100.0 * err,
+                error_unit: "σ0 %".into(),
+                light_error_deg: Some(
+                    Vector3::from(f.light_direction)
+                        .angle(&Vector3::from(truth.light_direction))
+                        .to_degrees(),
+                ),
+                decode_s: Some(f.timings.decode_s),
+                observations: f.reduction.as_ref().map(|r| r.chosen.observations),
+            });
+            pb.inc(1);
+        }
+    }
+    pb.finish_and_clear();
+    let report = BenchReport {
+        schema: SCHEMA.into(),
+        quick: opts.quick,
+        machine: machine(),
+        rows,
+        total_s: t0.elapsed().as_secs_f64(),
+    };
+    crate::output::write_json(&opts.out.join("report.json"), &report)?;
+    crate::output::write_bytes(&opts.out.join("report.md"), markdown(&report).as_bytes())?;
+    error_vs_time(&report).save(&opts.out.join("error-vs-time"))?;
+    Ok(report)
+}
+
+#[cfg(feature = "opencv")]
+fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
+    use crate::calibration::{run as cal, DetectorChoice};
+    use crate::synth::checkerboard::{self, CheckerConfig};
+    let mut cam = session::default_camera();
+    cam.fx *= 0.5;
+    cam.fy *= 0.5;
+    cam.cx = 321.6;
+    cam.cy = 239.3;
+    cam.image_size = [640, 480];
+    let cfg = CheckerConfig {
+        camera: cam,
+        views: if opts.quick { 10 } else { 15 },
+        ..CheckerConfig::default()
+    };
+    let dir = opts.out.join("checkerboard");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = checkerboard::generate(&cfg, &dir, true)?;
+    let truth = out.truth.intrinsics;
+    let mut rows = vec![];
+    for (name, choice) in [
+        ("classic", DetectorChoice::Classic),
+        ("sector-based", DetectorChoice::SectorBased),
+        ("auto", DetectorChoice::Auto),
+    ] {
+        let o = cal::Options {
+            dir: dir.clone(),
+            pattern: None,
+            square_mm: cfg.square_mm,
+            out: Some(dir.join(format!("intrinsics-{name}.json"))),
+            plots: Some(dir.join(format!("plots-{name}"))),
+            detector: choice,
+            subpix_window: None,
+            quiet: true,
+        };
+        let t = Instant::now();
+        let r = cal::run(&o, &crate::cv::OpenCvDetect, &crate::cv::OpenCv)?;
+        let c = &r.calibration.camera;
+        rows.push(Row {
+            stage: "calibration".into(),
+            data: format!("640×480, {} views", cfg.views),
+            setting: name.into(),
+            seconds: t.elapsed().as_secs_f64(),
+            error: 100.0
+                * ((c.fx - truth.fx).abs() / truth.fx).max((c.fy - truth.fy).abs() / truth.fy),
+            error_unit: "fx, fy %".into(),
+            light_error_deg: None,
+            decode_s: None,
+            observations: None,
+        });
+    }
+    Ok(rows)
+}
+
+/// The report as Markdown: one table of every setting, then the solve against decoding.
+pub fn markdown(r: &BenchReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "`workbench bench{}` on {} ({:.0} s in all).\n",
+        if r.quick { " --quick" } else { "" },
+        r.machine,
+        r.total_s
+    );
+    s.push_str("| stage | data | setting | time (s) | error | light error (°) | observations |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|\n");
+    for row in &r.rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.2} | {:.3} {} | {} | {} |",
+            row.stage,
+            row.data,
+            row.setting,
+            row.seconds,
+            row.error,
+            row.error_unit,
+            row.light_error_deg
+                .map_or(String::new(), |e| format!("{e:.3}")),
+            row.observations.map_or(String::new(), |n| n.to_string())
+        );
+    }
+    s.push_str(
+        "\n| data | solve (auto) / decoding | solve (every pixel) / decoding |\n|---|---:|---:|\n",
+    );
+    let mut names: Vec<&str> = r
+        .rows
+        .iter()
+        .filter(|x| x.stage == "solve")
+        .map(|x| x.data.as_str())
+        .collect();
+    names.dedup();
+    for n in names {
+        let ratio = |setting: &str| {
+            r.rows
+                .iter()
+                .find(|x| x.stage == "solve" && x.data == n && x.setting == setting)
+                .and_then(|x| x.decode_s.map(|d| x.seconds / d.max(1e-9)))
+                .map_or("–".to_string(), |v| format!("{v:.1}×"))
+        };
+        let _ = writeln!(s, "| {n} | {} | {} |", ratio("auto"), ratio("every pixel"));
+    }
+    s
+}
+
+/// σ0 error against solve time, one colour per session, each point named by its setting.
+fn error_vs_time(r: &BenchReport) -> Plot {
+    let mut p = Plot::new(
+        "Joint solve: σ0 error against time, per reduction setting",
+        "solve time (s)",
+        "worst σ0 error against the truth (%)",
+    );
+    let mut names: Vec<&str> = r
+        .rows
+        .iter()
+        .filter(|x| x.stage == "solve")
+        .map(|x| x.data.as_str())
+        .collect();
+    names.dedup();
+    let dx = 0.015
+        * r.rows
+            .iter()
+            .filter(|x| x.stage == "solve")
+            .map(|x| x.seconds)
+            .fold(0.0, f64::max);
+    for (k, n) in names.iter().enumerate() {
+        let pts: Vec<&Row> = r
+            .rows
+            .iter()
+            .filter(|x| x.stage == "solve" && x.data == *n)
+            .collect();
+        let color = PALETTE[k % PALETTE.len()];
+        p.layers.push(Layer::Points {
+            xy: pts.iter().map(|x| (x.seconds, x.error)).collect(),
+            color,
+            size: 5,
+            label: Some(n.to_string()),
+        });
+        p.layers.push(Layer::Text {
+            items: pts
+                .iter()
+                .map(|x| {
+                    (
+                        (x.seconds + 2.5 * dx, x.error),
+                        x.setting.replace(" cells", ""),
+                        color,
+                    )
+                })
+                .collect(),
+            size: 12,
+        });
+    }
+    p.size = (1100, 650);
+    p
+}
+
+/// Where the report goes by default.
+pub fn default_out() -> PathBuf {
+    Path::new("bench-report").to_path_buf()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(stage: &str, setting: &str, seconds: f64, decode: Option<f64>) -> Row {
+        Row {
+            stage: stage.into(),
+            data: "d".into(),
+            setting: setting.into(),
+            seconds,
+            error: 0.5,
+            error_unit: "σ0 %".into(),
+            light_error_deg: None,
+            decode_s: decode,
+            observations: None,
+        }
+    }
+
+    #[test]
+    fn report_ratios_and_settings() {
+        let r = BenchReport {
+            schema: SCHEMA.into(),
+            quick: true,
+            machine: "m".into(),
+            rows: vec![
+                row("solve", "every pixel", 3.0, Some(0.5)),
+                row("solve", "auto", 1.0, Some(0.5)),
+            ],
+            total_s: 1.0,
+        };
+        let md = markdown(&r);
+        assert!(md.contains("| d | 2.0× | 6.0× |"), "{md}");
+        let names: Vec<String> = reductions().into_iter().map(|r| r.0).collect();
+        assert_eq!(names.first().unwrap(), "every pixel");
+        assert_eq!(names.last().unwrap(), "auto");
+        assert!(names.contains(&"4° cells".to_string()));
+    }
+}
