@@ -257,6 +257,10 @@ pub struct FitFile {
     pub skipped: Vec<String>,
     pub notes: Vec<String>,
     pub timings: Timings,
+    /// What decides the result besides the inputs (method, priors, reduction, …): a later run with
+    /// the same options on unchanged inputs reuses this file.
+    #[serde(default)]
+    pub options: String,
 }
 
 /// The paper's baseline beside a joint fit: its assumptions and per-radius fits.
@@ -638,9 +642,66 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
     }
 }
 
-/// Run `solve` and write fit.json.
+/// The options that decide a fit's result (not where it is written, nor progress display).
+pub fn fingerprint(opts: &Options) -> String {
+    format!(
+        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | hold light {} | baseline {}",
+        env!("CARGO_PKG_VERSION"),
+        opts.method,
+        opts.holdout,
+        opts.eta_prior,
+        opts.irradiance,
+        opts.reduction,
+        opts.robust,
+        opts.extensions,
+        opts.start_sigma0,
+        opts.start_light.map(|l| (l.azimuth, l.elevation)),
+        opts.hold_light,
+        opts.baseline || opts.plots.is_some()
+    )
+}
+
+/// A fit.json that can stand for this run: newer than session.json, the photos, the intrinsics
+/// and detections.json, of this schema, and written with the same options. Not with --redetect
+/// or --plots (figures need the pixels).
+fn cached(opts: &Options) -> Option<(FitFile, PathBuf)> {
+    if opts.redetect || opts.plots.is_some() {
+        return None;
+    }
+    let report = session::inspect(&opts.session).ok()?;
+    let out = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| report.session_file.with_file_name("fit.json"));
+    let t = mtime(&out)?;
+    let mut inputs = vec![
+        report.session_file.clone(),
+        report.session_file.with_file_name("detections.json"),
+    ];
+    inputs.extend(report.images.iter().map(|i| i.path.clone()));
+    inputs.extend(report.intrinsics_file.clone());
+    if !inputs.iter().all(|p| mtime(p).is_some_and(|m| m < t)) {
+        return None;
+    }
+    let f: FitFile = crate::output::read_json(&out).ok()?;
+    (f.schema == SCHEMA && f.options == fingerprint(opts)).then_some((f, out))
+}
+
+/// Run `solve` and write fit.json (or reuse the one an identical earlier run wrote).
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
+    if let Some((mut f, out)) = cached(opts) {
+        f.skipped.insert(
+            0,
+            format!(
+                "solve: {} reused (newer than its inputs, same options; {:.3} s instead of {:.2} s)",
+                out.display(),
+                t0.elapsed().as_secs_f64(),
+                f.timings.total_s
+            ),
+        );
+        return Ok(f);
+    }
     let mut l = load(opts)?;
     // Stages after loading (detection shows its own bar): fit, predictions, output.
     let pb = crate::progress::bar(3, "solve", opts.quiet);
@@ -977,6 +1038,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             total_s: t0.elapsed().as_secs_f64(),
             ..l.timings
         },
+        options: fingerprint(opts),
     };
     crate::output::write_json(&out, &fit)?;
     if let Some(dir) = &opts.plots {

@@ -512,3 +512,27 @@ fn figures_are_written_and_redrawn_from_fit_json() {
     assert!(e.contains("not-a-fit.json") && !e.contains('\n'), "{e}");
     assert!(!dir.join("never").exists());
 }
+
+#[test]
+fn an_unchanged_rerun_reuses_fit_json() {
+    let dir = default_session();
+    let first = solve_with(dir, "fit-cache.json", |_| {});
+    assert!(!first.skipped.iter().any(|s| s.starts_with("solve:")));
+    let second = solve_with(dir, "fit-cache.json", |_| {});
+    assert!(
+        second.skipped[0].starts_with("solve:") && second.skipped[0].contains("reused"),
+        "{:?}",
+        second.skipped
+    );
+    assert_eq!(second.sigma0_mm, first.sigma0_mm);
+    assert_eq!(second.options, solve::fingerprint(&Options::new(dir)));
+    // Other options: solved again.
+    let other = solve_with(dir, "fit-cache.json", |o| o.hold_light = true);
+    assert!(!other.skipped.iter().any(|s| s.starts_with("solve:")));
+    // --redetect: solved again.
+    let again = solve_with(dir, "fit-cache.json", |o| {
+        o.hold_light = true;
+        o.redetect = true;
+    });
+    assert!(!again.skipped.iter().any(|s| s.starts_with("solve:")));
+}
