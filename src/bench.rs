@@ -300,13 +300,7 @@ pub fn markdown(r: &BenchReport) -> String {
     s.push_str(
         "\n| data | solve (auto) / decoding | solve (every pixel) / decoding |\n|---|---:|---:|\n",
     );
-    let mut names: Vec<&str> = r
-        .rows
-        .iter()
-        .filter(|x| x.stage == "solve")
-        .map(|x| x.data.as_str())
-        .collect();
-    names.dedup();
+    let names = solved(r);
     for n in names {
         let ratio = |setting: &str| {
             r.rows
@@ -320,13 +314,8 @@ pub fn markdown(r: &BenchReport) -> String {
     s
 }
 
-/// σ0 error against solve time, one colour per session, each point named by its setting.
-fn error_vs_time(r: &BenchReport) -> Plot {
-    let mut p = Plot::new(
-        "Joint solve: σ0 error against time, per reduction setting",
-        "solve time (s)",
-        "worst σ0 error against the truth (%)",
-    );
+/// The sessions the solve ran on, in run order.
+fn solved(r: &BenchReport) -> Vec<&str> {
     let mut names: Vec<&str> = r
         .rows
         .iter()
@@ -334,6 +323,17 @@ fn error_vs_time(r: &BenchReport) -> Plot {
         .map(|x| x.data.as_str())
         .collect();
     names.dedup();
+    names
+}
+
+/// σ0 error against solve time, one colour per session, each point named by its setting.
+fn error_vs_time(r: &BenchReport) -> Plot {
+    let mut p = Plot::new(
+        "Joint solve: σ0 error against time, per reduction setting",
+        "solve time (s)",
+        "worst σ0 error against the truth (%)",
+    );
+    let names = solved(r);
     let dx = 0.015
         * r.rows
             .iter()

@@ -3,6 +3,7 @@
 //! folder, a symlink loop. Each must give one line on stderr naming the file at fault, a non-zero
 //! exit, no panic, and no fit.json or detections.json.
 
+mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use workbench::synth::session::{self, Format, SessionConfig};
@@ -40,14 +41,8 @@ fn refused(cmd: &str, dir: &Path, needle: &str) -> String {
 
 /// A one-sphere 320×240 session in `<tmp>/<name>`.
 fn session_in(tmp: &Path, name: &str, format: Format) -> PathBuf {
-    let mut cam = session::default_camera();
-    cam.fx = 350.0;
-    cam.fy = 350.0;
-    cam.cx = 160.8;
-    cam.cy = 119.6;
-    cam.image_size = [320, 240];
     let cfg = SessionConfig {
-        camera: cam,
+        camera: common::camera_320x240(),
         radii_mm: vec![20.0],
         format,
         ..SessionConfig::default()

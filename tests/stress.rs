@@ -9,6 +9,7 @@
 //!
 //! Never NaN, never a panic, never a wrong answer reported as converged without a flag.
 
+mod common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -25,14 +26,8 @@ enum Outcome {
 
 /// A 320×240 camera and three radii unless the case says otherwise.
 fn config(f: impl FnOnce(&mut SessionConfig)) -> SessionConfig {
-    let mut cam = session::default_camera();
-    cam.fx = 350.0;
-    cam.fy = 350.0;
-    cam.cx = 160.8;
-    cam.cy = 119.6;
-    cam.image_size = [320, 240];
     let mut cfg = SessionConfig {
-        camera: cam,
+        camera: common::camera_320x240(),
         radii_mm: vec![30.0, 20.0, 12.0],
         ..SessionConfig::default()
     };

@@ -118,3 +118,14 @@ pub fn diligent_session(
     std::fs::write(dir.join("session.json"), session.to_string()).unwrap();
     (names, truth)
 }
+
+/// A 320×240 version of the synthetic camera (fx 350): small sessions for fast tests.
+pub fn camera_320x240() -> workbench::camera::Camera {
+    let mut cam = workbench::synth::session::default_camera();
+    cam.fx = 350.0;
+    cam.fy = 350.0;
+    cam.cx = 160.8;
+    cam.cy = 119.6;
+    cam.image_size = [320, 240];
+    cam
+}
