@@ -26,6 +26,17 @@ fn samples(n: usize) -> Vec<Geometry> {
         .collect()
 }
 
+/// The synthetic wax under a light from the upper right.
+fn params() -> Params {
+    Params {
+        material: SessionConfig::default().material,
+        light: LightAngles {
+            azimuth: 1.2,
+            elevation: 0.35,
+        },
+    }
+}
+
 fn bench_kernels(c: &mut Criterion) {
     let n = 10_000;
     let thetas: Vec<f64> = (0..n)
@@ -49,14 +60,7 @@ fn bench_kernels(c: &mut Criterion) {
     }
     let geo = samples(n);
     let model = Model::default();
-    let p = SessionConfig::default();
-    let params = Params {
-        material: p.material,
-        light: LightAngles {
-            azimuth: 1.2,
-            elevation: 0.35,
-        },
-    };
+    let params = params();
     g.bench_function("model_rgb", |b| {
         b.iter(|| {
             geo.iter()
@@ -111,14 +115,7 @@ fn bench_normal_equations(c: &mut Criterion) {
     use workbench::solver::{to_unbounded, Obs, Problem};
     let n = 100_000;
     let model = Model::default();
-    let p = SessionConfig::default();
-    let params = Params {
-        material: p.material,
-        light: LightAngles {
-            azimuth: 1.2,
-            elevation: 0.35,
-        },
-    };
+    let params = params();
     let obs: Vec<Obs> = samples(n)
         .into_iter()
         .map(|g| Obs {

@@ -321,8 +321,7 @@ pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
 
 /// A JPEG cut short decodes without complaint (the missing rows grey): refuse one whose last scan
 /// (the last SOS marker, after any EXIF thumbnail's) has no end-of-image marker after it.
-fn check_jpeg_end(path: &Path) -> Result<()> {
-    let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+fn check_jpeg_end(path: &Path, b: &[u8]) -> Result<()> {
     let last = |m: u8| b.windows(2).rposition(|w| w[0] == 0xFF && w[1] == m);
     match (last(0xDA), last(0xD9)) {
         (Some(sos), Some(eoi)) if eoi > sos => Ok(()),
@@ -336,15 +335,16 @@ fn check_jpeg_end(path: &Path) -> Result<()> {
 /// Decode a JPEG, PNG or TIFF file with its EXIF orientation applied.
 fn decode_oriented(path: &Path) -> Result<image::DynamicImage> {
     use image::ImageDecoder;
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
+    // Read once: the JPEG end check and the decoder share the bytes.
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;
     if reader.format().is_none() {
         return Err(Error::invalid(path, "not a JPEG, PNG or TIFF image"));
     }
     if reader.format() == Some(image::ImageFormat::Jpeg) {
-        check_jpeg_end(path)?;
+        check_jpeg_end(path, &bytes)?;
     }
     let mut dec = reader.into_decoder().map_err(|e| image_err(path, e))?;
     let (w, h) = dec.dimensions();

@@ -366,15 +366,20 @@ fn mtime(p: &Path) -> Option<SystemTime> {
     std::fs::metadata(p).and_then(|m| m.modified()).ok()
 }
 
+/// The files a session's results depend on: session.json, the photos, the intrinsics.
+fn inputs(report: &SessionReport) -> Vec<PathBuf> {
+    let mut v = vec![report.session_file.clone()];
+    v.extend(report.images.iter().map(|i| i.path.clone()));
+    v.extend(report.intrinsics_file.clone());
+    v
+}
+
 /// Whether `detections.json` can be reused: newer than every input, same schema, same photos.
 fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detections, String> {
     let Some(t) = mtime(path) else {
         return Err("no detections.json yet".into());
     };
-    let mut inputs = vec![report.session_file.clone()];
-    inputs.extend(report.images.iter().map(|i| i.path.clone()));
-    inputs.extend(report.intrinsics_file.clone());
-    for p in &inputs {
+    for p in &inputs(report) {
         match mtime(p) {
             Some(m) if m < t => {}
             _ => {
@@ -412,7 +417,11 @@ fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detectio
 /// Check the session, reuse or run detection, decode and sample.
 pub fn load(opts: &Options) -> Result<Loaded> {
     let t0 = Instant::now();
-    let report = session::inspect(&opts.session)?;
+    load_inspected(opts, session::inspect(&opts.session)?, t0)
+}
+
+/// [`load`] for a session already inspected (at `t0`).
+fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<Loaded> {
     let (sess, _) = Session::load(&report.session_file)?;
     if sess.light == LightMode::PerImage {
         return Err(Error::invalid(
@@ -664,23 +673,18 @@ pub fn fingerprint(opts: &Options) -> String {
 /// A fit.json that can stand for this run: newer than session.json, the photos, the intrinsics
 /// and detections.json, of this schema, and written with the same options. Not with --redetect
 /// or --plots (figures need the pixels).
-fn cached(opts: &Options) -> Option<(FitFile, PathBuf)> {
+fn cached(opts: &Options, report: &SessionReport) -> Option<(FitFile, PathBuf)> {
     if opts.redetect || opts.plots.is_some() {
         return None;
     }
-    let report = session::inspect(&opts.session).ok()?;
     let out = opts
         .out
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("fit.json"));
     let t = mtime(&out)?;
-    let mut inputs = vec![
-        report.session_file.clone(),
-        report.session_file.with_file_name("detections.json"),
-    ];
-    inputs.extend(report.images.iter().map(|i| i.path.clone()));
-    inputs.extend(report.intrinsics_file.clone());
-    if !inputs.iter().all(|p| mtime(p).is_some_and(|m| m < t)) {
+    let mut files = inputs(report);
+    files.push(report.session_file.with_file_name("detections.json"));
+    if !files.iter().all(|p| mtime(p).is_some_and(|m| m < t)) {
         return None;
     }
     let f: FitFile = crate::output::read_json(&out).ok()?;
@@ -690,7 +694,8 @@ fn cached(opts: &Options) -> Option<(FitFile, PathBuf)> {
 /// Run `solve` and write fit.json (or reuse the one an identical earlier run wrote).
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
-    if let Some((mut f, out)) = cached(opts) {
+    let report = session::inspect(&opts.session)?;
+    if let Some((mut f, out)) = cached(opts, &report) {
         f.skipped.insert(
             0,
             format!(
@@ -702,7 +707,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         );
         return Ok(f);
     }
-    let mut l = load(opts)?;
+    let mut l = load_inspected(opts, report, t0)?;
     // Stages after loading (detection shows its own bar): fit, predictions, output.
     let pb = crate::progress::bar(3, "solve", opts.quiet);
     pb.enable_steady_tick(std::time::Duration::from_millis(200));
