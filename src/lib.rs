@@ -20,6 +20,8 @@ pub mod fresnel;
 pub mod highlight;
 pub mod intrinsics;
 pub mod joint;
+pub mod lut;
+pub mod mesh;
 pub mod model;
 pub mod observe;
 pub mod outline;

@@ -220,6 +220,27 @@ pub type Rgb = [f64; 3];
 pub type Gradient = [[f64; N_PARAMS]; 3];
 
 impl Model {
+    /// The diffuse term's blur σ_c (radians) and albedo a_c at curvature κ = 1/r (1/mm), as in the
+    /// module formula; κ = 0 is a flat surface (the limit r → ∞: σ = 0 unless q ≤ −1).
+    pub fn diffuse_terms(&self, m: &Material, kappa: f64) -> ([f64; 3], [f64; 3]) {
+        // κ = 0 evaluated as the limit κ → 0⁺ (a tiny κ gives σ = 0 for q > −1, σ0 / r_ref for
+        // q = −1 and ∞ below, without 0 · ∞).
+        let kappa = kappa.max(1e-300);
+        let rr = self.reference_radius_mm * kappa;
+        let scale = rr.powf(m.sigma_exponent);
+        let albedo_scale = (m.albedo_curvature * (rr - 1.0)).exp();
+        let sigma = std::array::from_fn(|c| (m.sigma0_mm[c] * kappa) * scale);
+        (sigma, std::array::from_fn(|c| m.albedo[c] * albedo_scale))
+    }
+
+    /// The diffuse term without exit transmission, a_c · f(θ; σ_c), at cos θ = n·l and κ = 1/r:
+    /// what the look-up table of [`crate::lut`] holds.
+    pub fn diffuse(&self, m: &Material, cos_theta: f64, kappa: f64) -> Rgb {
+        let theta = cos_theta.clamp(-1.0, 1.0).acos();
+        let (sigma, albedo) = self.diffuse_terms(m, kappa);
+        std::array::from_fn(|c| albedo[c] * cdrf::value(theta, sigma[c], self.convolution))
+    }
+
     /// RGB radiance at one surface point.
     pub fn radiance(&self, p: &Params, g: &Geometry) -> Rgb {
         self.eval(p, g, false).0
