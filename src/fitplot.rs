@@ -768,24 +768,7 @@ pub fn write_all(
 pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
     let fit: FitFile = crate::output::read_json(fit_path)?;
     fit.validate(fit_path)?;
-    let named = PathBuf::from(&fit.session);
-    let beside = fit_path
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join("session.json");
-    let session = if named.is_file() {
-        named
-    } else if beside.is_file() {
-        beside
-    } else {
-        return Err(Error::invalid(
-            fit_path,
-            format!(
-                "its session {} is gone and no session.json lies beside it",
-                fit.session
-            ),
-        ));
-    };
+    let session = fit.session_path(fit_path)?;
     let mut opts = crate::solve::Options::new(&session);
     opts.quiet = quiet;
     let l = crate::solve::load(&opts)?;

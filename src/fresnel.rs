@@ -56,9 +56,17 @@ pub fn eval(cos_i: f64, eta: f64) -> FresnelEval {
     }
 }
 
-/// Fresnel reflectance alone.
+/// Fresnel reflectance alone (no derivatives: the renderer's inner loop).
 pub fn reflectance(cos_i: f64, eta: f64) -> f64 {
-    eval(cos_i, eta).reflectance
+    let ci = cos_i.clamp(0.0, 1.0);
+    let ct2 = 1.0 - (1.0 - ci * ci) / (eta * eta);
+    if ct2 <= 0.0 || (ci == 0.0 && eta <= 1.0) {
+        return 1.0;
+    }
+    let ct = ct2.sqrt();
+    let rs = (ci - eta * ct) / (ci + eta * ct);
+    let rp = (eta * ci - ct) / (eta * ci + ct);
+    0.5 * (rs * rs + rp * rp)
 }
 
 /// Fresnel transmission T = 1 − F.
@@ -77,6 +85,16 @@ mod tests {
         assert!((reflectance(1.0, eta) - f0).abs() < 1e-15);
         assert!((reflectance(0.0, eta) - 1.0).abs() < 1e-15);
         assert!(reflectance(0.7, 1.0) < 1e-15);
+    }
+
+    #[test]
+    fn reflectance_equals_eval() {
+        for eta in [1.0, 1.2, 1.5, 2.4] {
+            for k in 0..=100 {
+                let c = k as f64 / 100.0;
+                assert!((reflectance(c, eta) - eval(c, eta).reflectance).abs() < 1e-15);
+            }
+        }
     }
 
     #[test]

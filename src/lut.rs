@@ -55,7 +55,13 @@ pub struct Lut {
 
 impl Lut {
     /// Tabulate `model`'s diffuse term for `material`.
-    pub fn build(model: &Model, material: &Material, n_cos: usize, n_kappa: usize, kappa_max: f64) -> Lut {
+    pub fn build(
+        model: &Model,
+        material: &Material,
+        n_cos: usize,
+        n_kappa: usize,
+        kappa_max: f64,
+    ) -> Lut {
         assert!(n_cos >= 2 && n_kappa >= 2 && kappa_max > 0.0);
         let mut lut = Lut {
             n_cos,
@@ -197,7 +203,12 @@ pub fn interpolation_error(lut: &Lut, model: &Model, material: &Material) -> Int
 
 /// The smallest table of [`SIZES`] whose largest error is within `tolerance` of its peak (the
 /// largest size when none is), with its measured error.
-pub fn choose(model: &Model, material: &Material, kappa_max: f64, tolerance: f64) -> (Lut, InterpolationError) {
+pub fn choose(
+    model: &Model,
+    material: &Material,
+    kappa_max: f64,
+    tolerance: f64,
+) -> (Lut, InterpolationError) {
     let mut last = None;
     for &(nc, nk) in &SIZES {
         let lut = Lut::build(model, material, nc, nk, kappa_max);
@@ -324,7 +335,12 @@ pub fn write(
     let paths = output_paths(out);
     let [png, exr, json] = &paths;
     let scale = lut.peak().max(f64::MIN_POSITIVE);
-    write_png16_rgb(png, lut.n_cos as u32, lut.n_kappa as u32, &lut.to_u16(scale))?;
+    write_png16_rgb(
+        png,
+        lut.n_cos as u32,
+        lut.n_kappa as u32,
+        &lut.to_u16(scale),
+    )?;
     let floats: Vec<f32> = lut.values.iter().flat_map(|v| v.iter().copied()).collect();
     let img = image::Rgb32FImage::from_raw(lut.n_cos as u32, lut.n_kappa as u32, floats)
         .expect("buffer matches the size");
@@ -335,7 +351,11 @@ pub fn write(
             err: e,
         })?;
     write_bytes(exr, bytes.get_ref())?;
-    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
     let sidecar = LutJson {
         schema: SCHEMA.into(),
         fit: fit_path.display().to_string(),
@@ -374,10 +394,15 @@ mod tests {
     use nalgebra::Vector3;
 
     fn material() -> Material {
-        let mut p = Params::diffuse([4.0, 3.0, 2.2], [0.8, 0.62, 0.45], 1.44, LightAngles {
-            azimuth: 0.0,
-            elevation: 0.0,
-        });
+        let mut p = Params::diffuse(
+            [4.0, 3.0, 2.2],
+            [0.8, 0.62, 0.45],
+            1.44,
+            LightAngles {
+                azimuth: 0.0,
+                elevation: 0.0,
+            },
+        );
         p.material.sigma_exponent = 0.3;
         p.material.albedo_curvature = 0.1;
         p.material
@@ -390,16 +415,28 @@ mod tests {
         let model = Model::default();
         let m = material();
         for (az, r) in [(0.3, 15.0), (1.2, 35.0), (2.0, 20.0)] {
-            let light = LightAngles { azimuth: az, elevation: 0.1 };
+            let light = LightAngles {
+                azimuth: az,
+                elevation: 0.1,
+            };
             let p = Params { material: m, light };
             let n = Vector3::new(0.3, -0.2, -0.9).normalize();
             let v = Vector3::new(0.0, 0.0, -1.0);
-            let g = Geometry { normal: n, view: v, radius_mm: r };
+            let g = Geometry {
+                normal: n,
+                view: v,
+                radius_mm: r,
+            };
             let rad = model.radiance(&p, &g);
             let t = crate::fresnel::transmission(n.dot(&v), m.eta);
             let d = model.diffuse(&m, n.dot(&light.direction()), 1.0 / r);
             for c in 0..3 {
-                assert!((rad[c] - t * d[c]).abs() < 1e-12, "{c}: {} vs {}", rad[c], t * d[c]);
+                assert!(
+                    (rad[c] - t * d[c]).abs() < 1e-12,
+                    "{c}: {} vs {}",
+                    rad[c],
+                    t * d[c]
+                );
             }
         }
         // κ = 0 is the clamped cosine times the flat albedo a · exp(−b).
@@ -437,7 +474,10 @@ mod tests {
         let (lut, err) = choose(&model, &m, 0.2, 2e-3);
         assert!(err.max_rel <= 2e-3);
         // The size before it would not have met it.
-        let k = SIZES.iter().position(|&s| s == (lut.n_cos, lut.n_kappa)).unwrap();
+        let k = SIZES
+            .iter()
+            .position(|&s| s == (lut.n_cos, lut.n_kappa))
+            .unwrap();
         if k > 0 {
             let (nc, nk) = SIZES[k - 1];
             let smaller = interpolation_error(&Lut::build(&model, &m, nc, nk, 0.2), &model, &m);
@@ -448,7 +488,10 @@ mod tests {
     #[test]
     fn output_paths_drop_a_known_extension() {
         let [a, b, c] = output_paths(Path::new("x/lut.png"));
-        assert_eq!((a.to_str(), b.to_str(), c.to_str()), (Some("x/lut.png"), Some("x/lut.exr"), Some("x/lut.json")));
+        assert_eq!(
+            (a.to_str(), b.to_str(), c.to_str()),
+            (Some("x/lut.png"), Some("x/lut.exr"), Some("x/lut.json"))
+        );
         let [a, _, _] = output_paths(Path::new("x/wax.v2"));
         assert_eq!(a.to_str(), Some("x/wax.v2.png"));
     }

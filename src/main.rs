@@ -40,6 +40,10 @@ enum Command {
     Bench(BenchArgs),
     /// Redraw a fit's figures and index.html from fit.json and its session, without solving.
     Plot(PlotArgs),
+    /// Tabulate a fit's CDRF over N·L and curvature: 16-bit PNG, OpenEXR and a JSON sidecar.
+    Lut(LutArgs),
+    /// Render a mesh (OBJ or PLY) with a fit's CDRF, or check the renderer against the fit.
+    Render(RenderArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -130,6 +134,134 @@ struct PlotArgs {
     /// Folder for the figures (default: plots/ beside fit.json).
     #[arg(long)]
     out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct LutArgs {
+    /// The fit (fit.json written by `workbench solve`).
+    fit: PathBuf,
+    /// Output stem: writes <out>.png, <out>.exr and <out>.json (default: lut beside fit.json).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Table nodes as N_COSxN_KAPPA (e.g. 257x129), or "auto": the smallest standard size within
+    /// --tolerance.
+    #[arg(long, default_value = "auto", value_parser = parse_table_size)]
+    size: TableArg,
+    /// Largest interpolation error allowed by --size auto, as a fraction of the table's peak.
+    #[arg(long, default_value_t = workbench::lut::DEFAULT_TOLERANCE)]
+    tolerance: f64,
+    /// Curvature of the table's last row (1/mm; default 3 / the smallest radius fitted).
+    #[arg(long)]
+    kappa_max: Option<f64>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// The mesh (.obj or .ply); not with --check.
+    #[arg(required_unless_present = "check")]
+    mesh: Option<PathBuf>,
+    /// The fit (fit.json written by `workbench solve`).
+    #[arg(long)]
+    fit: PathBuf,
+    /// The image to write (.png); with --check, a folder (default: render-check/ beside fit.json).
+    #[arg(long, required_unless_present = "check")]
+    out: Option<PathBuf>,
+    /// Render every sphere of the fit's session as an ideal sphere mesh and compare it with the
+    /// solver's predicted image.
+    #[arg(long, conflicts_with = "mesh")]
+    check: bool,
+    /// Units of the mesh file's coordinates.
+    #[arg(long, value_enum, default_value = "mm")]
+    unit: workbench::mesh::Unit,
+    /// Rescale the mesh so its bounding sphere is this many mm across.
+    #[arg(long)]
+    object_size: Option<f64>,
+    /// Light as AZIMUTH,ELEVATION degrees in the camera frame (0,0: at the camera; azimuth to the
+    /// right, elevation up). Default: the fit's light.
+    #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
+    light: Option<(f64, f64)>,
+    /// Camera position around the mesh as AZIMUTH,ELEVATION degrees (mesh y up; 0,0 looks along −z).
+    #[arg(long, value_parser = parse_pair, default_value = "0,0", allow_hyphen_values = true)]
+    view: (f64, f64),
+    /// Camera distance relative to the tightest framing of the mesh's bounding sphere.
+    #[arg(long, default_value_t = 1.05)]
+    distance: f64,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_resolution)]
+    resolution: (u32, u32),
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 30.0)]
+    fov: f64,
+    /// Coverage samples per pixel (anti-aliasing).
+    #[arg(long, value_enum, default_value = "4")]
+    samples: workbench::render::Samples,
+    /// cdrf: the measured CDRF; lambert: the same material with a plain clamped cosine.
+    #[arg(long, value_enum, default_value = "cdrf")]
+    shading: workbench::render::Shading,
+    /// Bits per channel of the PNG (8 or 16).
+    #[arg(long, default_value_t = 8)]
+    bits: u8,
+    /// Transfer curve.
+    #[arg(long, value_enum, default_value = "srgb")]
+    tone: workbench::render::Tone,
+    /// Exposure multiplier (1: a flat surface facing the light at 0.8 of full scale).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f64,
+    /// Table nodes (N_COSxN_KAPPA or auto), as for `workbench lut`.
+    #[arg(long, default_value = "auto", value_parser = parse_table_size)]
+    table: TableArg,
+}
+
+fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected AZIMUTH,ELEVATION in degrees, got {s:?}"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("not a finite number: {t:?}"))
+    };
+    Ok((p(a)?, p(b)?))
+}
+
+fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (a, b) = s
+        .split_once('x')
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("not a pixel count: {t:?}"))
+    };
+    Ok((p(a)?, p(b)?))
+}
+
+/// A table size: None for auto.
+#[derive(Clone, Copy)]
+struct TableArg(Option<(usize, usize)>);
+
+fn parse_table_size(s: &str) -> std::result::Result<TableArg, String> {
+    if s == "auto" {
+        return Ok(TableArg(None));
+    }
+    let (a, b) = s
+        .split_once('x')
+        .ok_or_else(|| format!("expected auto or N_COSxN_KAPPA, got {s:?}"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("not a node count: {t:?}"))
+    };
+    Ok(TableArg(Some((p(a)?, p(b)?))))
+}
+
+fn table_size(size: TableArg, tolerance: f64) -> workbench::render_job::TableSize {
+    match size.0 {
+        Some((a, b)) => workbench::render_job::TableSize::Fixed(a, b),
+        None => workbench::render_job::TableSize::Auto(tolerance),
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -823,6 +955,121 @@ fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+fn lut(a: LutArgs) -> Result<()> {
+    let out = a.out.clone().unwrap_or_else(|| {
+        a.fit
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join("lut")
+    });
+    let (t, fm, paths) = workbench::render_job::write_lut(
+        &a.fit,
+        &out,
+        table_size(a.size, a.tolerance),
+        a.kappa_max,
+    )
+    .with_context(|| format!("lut {}", a.fit.display()))?;
+    for ((nc, nk), e) in &t.tried {
+        println!(
+            "size     {nc}x{nk}: largest interpolation error {:.2e} of the peak",
+            e
+        );
+    }
+    let e = &t.error;
+    println!(
+        "table    {}x{} nodes, N·L -1..1, curvature 0..{:.4}/mm (fit measured {:.4}..{:.4}/mm)",
+        t.lut.n_cos, t.lut.n_kappa, t.lut.kappa_max, fm.measured_kappa[0], fm.measured_kappa[1]
+    );
+    println!(
+        "error    largest {:.2e} ({:.2e} of the peak {:.4}) at N·L {:.3}, curvature {:.4}/mm; rms {:.2e}",
+        e.max_abs,
+        e.max_rel,
+        t.lut.peak(),
+        e.at_cos,
+        e.at_kappa_per_mm,
+        e.rms
+    );
+    for p in &paths {
+        println!("wrote    {}", p.display());
+    }
+    Ok(())
+}
+
+fn render(a: RenderArgs) -> Result<()> {
+    let table = table_size(a.table, workbench::lut::DEFAULT_TOLERANCE);
+    if a.check {
+        let dir = a.out.clone().unwrap_or_else(|| {
+            a.fit
+                .parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join("render-check")
+        });
+        let res = workbench::render_job::check(&a.fit, &dir, table)
+            .with_context(|| format!("render --check {}", a.fit.display()))?;
+        println!("sphere               radius  pixels  silhouette  rel. RMS   largest");
+        for c in &res {
+            println!(
+                "{:<16} {:>2}  {:>5.1}  {:>6}  {:>10}  {:>8.2e}  {:>8.2e}",
+                c.image, c.index, c.radius_mm, c.pixels, c.silhouette_px, c.rel_rmse, c.max_rel
+            );
+        }
+        println!("wrote    {}", dir.join("sphere-check.json").display());
+        return Ok(());
+    }
+    let (Some(mesh), Some(out)) = (a.mesh.clone(), a.out.clone()) else {
+        bail!("a mesh and --out are needed without --check");
+    };
+    let mut o = workbench::render_job::RenderOptions::new(&mesh, &a.fit, &out);
+    o.unit = a.unit;
+    o.object_size_mm = a.object_size;
+    o.light_deg = a.light;
+    o.view = workbench::render::View {
+        azimuth_deg: a.view.0,
+        elevation_deg: a.view.1,
+        distance: a.distance,
+    };
+    (o.width, o.height) = a.resolution;
+    o.fov_deg = a.fov;
+    o.samples = a.samples;
+    o.shading = a.shading;
+    o.bits = a.bits;
+    o.tone = a.tone;
+    o.exposure = a.exposure;
+    o.table = table;
+    let r = workbench::render_job::run(&o).with_context(|| format!("render {}", mesh.display()))?;
+    println!(
+        "mesh     {} vertices, {} triangles, {:.1} mm across",
+        r.vertices,
+        r.triangles,
+        2.0 * r.radius_mm
+    );
+    println!(
+        "curvature 5/50/95%: {:.4} {:.4} {:.4} /mm; {:.1}% of vertices beyond the table's range (clamped)",
+        r.curvature[0],
+        r.curvature[1],
+        r.curvature[2],
+        100.0 * r.clamped
+    );
+    println!(
+        "table    {}x{} (largest error {:.2e} of the peak); light azimuth {:.1}°, elevation {:.1}°",
+        r.table.0,
+        r.table.1,
+        r.table_error,
+        r.light.azimuth.to_degrees(),
+        r.light.elevation.to_degrees()
+    );
+    println!(
+        "time     load {:.3} s, curvature {:.3} s, table {:.3} s, frame {:.1} ms, write {:.3} s",
+        r.load_s,
+        r.curvature_s,
+        r.table_s,
+        1e3 * r.frame_s,
+        r.write_s
+    );
+    println!("wrote    {}", out.display());
+    Ok(())
+}
+
 fn check(session: PathBuf) -> Result<()> {
     let r = workbench::session::inspect(&session)?;
     println!("session  {}", r.session_file.display());
@@ -902,6 +1149,8 @@ fn main() {
         Command::Solve(a) => solve(a, cli.quiet),
         Command::Plot(a) => plot(a, cli.quiet),
         Command::Bench(a) => bench(a, cli.quiet),
+        Command::Lut(a) => lut(a),
+        Command::Render(a) => render(a),
         Command::Check { session } => check(session),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate(a, cli.quiet),

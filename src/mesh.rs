@@ -61,13 +61,22 @@ impl Mesh {
         file: &Path,
     ) -> Result<Mesh> {
         if positions.len() > MAX_ELEMENTS || triangles.len() > MAX_ELEMENTS {
-            return Err(Error::invalid(file, format!("mesh larger than {MAX_ELEMENTS} elements")));
+            return Err(Error::invalid(
+                file,
+                format!("mesh larger than {MAX_ELEMENTS} elements"),
+            ));
         }
-        if let Some(k) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        if let Some(k) = positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
             return Err(Error::invalid(file, format!("vertex {k} is not finite")));
         }
         let n = positions.len();
-        if let Some(t) = triangles.iter().find(|t| t.iter().any(|&i| i as usize >= n)) {
+        if let Some(t) = triangles
+            .iter()
+            .find(|t| t.iter().any(|&i| i as usize >= n))
+        {
             return Err(Error::invalid(
                 file,
                 format!("face {:?} refers to a vertex beyond the {n} given", t),
@@ -84,7 +93,12 @@ impl Mesh {
             return Err(Error::invalid(file, "no triangles with area"));
         }
         let normals = match normals {
-            Some(ns) if ns.len() == n && ns.iter().all(|v| v.norm() > 0.0 && v.iter().all(|c| c.is_finite())) => {
+            Some(ns)
+                if ns.len() == n
+                    && ns
+                        .iter()
+                        .all(|v| v.norm() > 0.0 && v.iter().all(|c| c.is_finite())) =>
+            {
                 ns.iter().map(|v| v.normalize()).collect()
             }
             _ => vertex_normals(&positions, &triangles),
@@ -105,7 +119,12 @@ impl Mesh {
         let (mut pos, tris, normals) = match ext.as_deref() {
             Some("obj") => read_obj(path)?,
             Some("ply") => read_ply(path)?,
-            _ => return Err(Error::invalid(path, "not a mesh: expected a .obj or .ply file")),
+            _ => {
+                return Err(Error::invalid(
+                    path,
+                    "not a mesh: expected a .obj or .ply file",
+                ))
+            }
         };
         let s = unit.mm();
         for p in &mut pos {
@@ -123,7 +142,11 @@ impl Mesh {
             hi = hi.sup(p);
         }
         let c = (lo + hi) / 2.0;
-        let r = self.positions.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
+        let r = self
+            .positions
+            .iter()
+            .map(|p| (p - c).norm())
+            .fold(0.0, f64::max);
         (c, r)
     }
 
@@ -173,7 +196,11 @@ impl Mesh {
             .map(|i| {
                 // An interior vertex leaves out its boundary neighbours (their normals see one side
                 // only) while three or more others remain.
-                let inner: Vec<u32> = nb[i].iter().copied().filter(|&j| !boundary[j as usize]).collect();
+                let inner: Vec<u32> = nb[i]
+                    .iter()
+                    .copied()
+                    .filter(|&j| !boundary[j as usize])
+                    .collect();
                 if !boundary[i] && inner.len() >= 3 {
                     self.vertex_curvature(i, &inner)
                 } else {
@@ -202,7 +229,10 @@ impl Mesh {
         for _ in 0..SMOOTHING_ROUNDS {
             k = (0..k.len())
                 .into_par_iter()
-                .map(|i| (k[i] + nb[i].iter().map(|&j| k[j as usize]).sum::<f64>()) / (1 + nb[i].len()) as f64)
+                .map(|i| {
+                    (k[i] + nb[i].iter().map(|&j| k[j as usize]).sum::<f64>())
+                        / (1 + nb[i].len()) as f64
+                })
                 .collect();
         }
         k
@@ -215,7 +245,11 @@ impl Mesh {
         let p = self.positions[i];
         let n = self.normals[i];
         // Tangent frame.
-        let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let helper = if n.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
         let t1 = n.cross(&helper).normalize();
         let t2 = n.cross(&t1);
         let mut ata = Matrix3::zeros();
@@ -292,7 +326,9 @@ fn read_obj(path: &Path) -> Result<Loaded> {
     };
     // Materials are not used: a missing .mtl is no error.
     let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => Error::io(path, std::io::Error::other("cannot open the file")),
+        tobj::LoadError::OpenFileFailed => {
+            Error::io(path, std::io::Error::other("cannot open the file"))
+        }
         e => Error::invalid(path, format!("not a readable OBJ file: {e}")),
     })?;
     let mut pos = Vec::new();
@@ -303,15 +339,26 @@ fn read_obj(path: &Path) -> Result<Loaded> {
         let mesh = &m.mesh;
         let base = pos.len() as u32;
         let nv = mesh.positions.len() / 3;
-        pos.extend(mesh.positions.chunks_exact(3).map(|c| Vector3::new(c[0] as f64, c[1] as f64, c[2] as f64)));
+        pos.extend(
+            mesh.positions
+                .chunks_exact(3)
+                .map(|c| Vector3::new(c[0] as f64, c[1] as f64, c[2] as f64)),
+        );
         if mesh.normals.len() == mesh.positions.len() {
-            normals.extend(mesh.normals.chunks_exact(3).map(|c| Vector3::new(c[0] as f64, c[1] as f64, c[2] as f64)));
+            normals.extend(
+                mesh.normals
+                    .chunks_exact(3)
+                    .map(|c| Vector3::new(c[0] as f64, c[1] as f64, c[2] as f64)),
+            );
         } else {
             all_normals = false;
         }
         for t in mesh.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {
-                return Err(Error::invalid(path, format!("face refers to vertex {} of {nv}", t.iter().max().unwrap())));
+                return Err(Error::invalid(
+                    path,
+                    format!("face refers to vertex {} of {nv}", t.iter().max().unwrap()),
+                ));
             }
             tris.push([base + t[0], base + t[1], base + t[2]]);
         }
@@ -329,7 +376,15 @@ fn read_ply(path: &Path) -> Result<Loaded> {
     let mut reader = std::io::BufReader::new(file);
     let ply = Parser::<DefaultElement>::new()
         .read_ply(&mut reader)
-        .map_err(|e| Error::invalid(path, format!("not a readable PLY file: {}", crate::error::one_line(&e.to_string()))))?;
+        .map_err(|e| {
+            Error::invalid(
+                path,
+                format!(
+                    "not a readable PLY file: {}",
+                    crate::error::one_line(&e.to_string())
+                ),
+            )
+        })?;
     let vertices = ply
         .payload
         .get("vertex")
@@ -366,10 +421,18 @@ fn read_ply(path: &Path) -> Result<Loaded> {
             Some(Property::ListUShort(v)) => v.iter().map(|&i| i as i64).collect(),
             Some(Property::ListChar(v)) => v.iter().map(|&i| i as i64).collect(),
             Some(Property::ListUChar(v)) => v.iter().map(|&i| i as i64).collect(),
-            _ => return Err(Error::invalid(path, format!("face {k} has no integer vertex_indices list"))),
+            _ => {
+                return Err(Error::invalid(
+                    path,
+                    format!("face {k} has no integer vertex_indices list"),
+                ))
+            }
         };
         if idx.iter().any(|&i| i < 0 || i >= pos.len() as i64) {
-            return Err(Error::invalid(path, format!("face {k} refers to a vertex outside 0..{}", pos.len())));
+            return Err(Error::invalid(
+                path,
+                format!("face {k} refers to a vertex outside 0..{}", pos.len()),
+            ));
         }
         // Fan triangulation of polygons.
         for w in 1..idx.len().saturating_sub(1) {
@@ -406,10 +469,26 @@ pub mod shapes {
         .map(|&(x, y, z)| Vector3::new(x, y, z).normalize())
         .collect();
         let mut f: Vec<[u32; 3]> = vec![
-            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-            [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-            [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-            [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
         ];
         for _ in 0..level {
             let mut mid: HashMap<(u32, u32), u32> = HashMap::new();

@@ -324,6 +324,29 @@ impl FitFile {
         p
     }
 
+    /// The session this fit was solved on: the file it names, or session.json beside the fit
+    /// when that has moved.
+    pub fn session_path(&self, fit_path: &Path) -> Result<PathBuf> {
+        let named = PathBuf::from(&self.session);
+        let beside = fit_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("session.json");
+        if named.is_file() {
+            Ok(named)
+        } else if beside.is_file() {
+            Ok(beside)
+        } else {
+            Err(Error::invalid(
+                fit_path,
+                format!(
+                    "its session {} is gone and no session.json lies beside it",
+                    self.session
+                ),
+            ))
+        }
+    }
+
     /// Check what was read: schema and parameter names.
     pub fn validate(&self, file: &Path) -> Result<()> {
         if self.schema != SCHEMA {

@@ -81,9 +81,40 @@ pub fn lobe(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> LobeEva
     }
 }
 
+/// The value of [`lobe`] alone, without derivatives (the renderer's inner loop).
+pub fn lobe_value(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> f64 {
+    if nl <= 0.0 || nv <= 0.0 || lv <= -1.0 + 1e-12 {
+        return 0.0;
+    }
+    let nh = ((nl + nv) / (2.0 + 2.0 * lv).sqrt()).min(1.0);
+    let lh = (0.5 * (1.0 + lv)).sqrt();
+    let a2 = alpha * alpha;
+    let q = nh * nh * (a2 - 1.0) + 1.0;
+    let d = a2 / (PI * q * q);
+    let g1 = |c: f64| 2.0 * c / (c + (a2 + (1.0 - a2) * c * c).sqrt());
+    ks * d * g1(nl) * g1(nv) * fresnel::reflectance(lh, eta) / (4.0 * nv)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lobe_value_equals_lobe() {
+        for &(nl, nv, lv) in &[
+            (0.9, 0.8, 0.5),
+            (0.2, 0.95, -0.3),
+            (0.6, 0.1, 0.2),
+            (1.0, 1.0, 1.0),
+        ] {
+            for &alpha in &[0.02, 0.1, 0.7] {
+                let a = lobe(nl, nv, lv, 1.3, alpha, 1.45).value;
+                let b = lobe_value(nl, nv, lv, 1.3, alpha, 1.45);
+                assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} {b}");
+            }
+        }
+        assert_eq!(lobe_value(-0.1, 0.5, 0.0, 1.0, 0.1, 1.5), 0.0);
+    }
 
     /// ∫ D(h) (n·h) dω_h = 1 over the hemisphere: the normalisation of a microfacet distribution.
     #[test]
