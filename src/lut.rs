@@ -4,11 +4,12 @@
 //!
 //!     D_c(N·L, κ) = a_c(κ) · f(acos(N·L); σ_c(κ))        (see [`Model::diffuse`])
 //!
-//! on a grid of nodes: column i is N·L = −1 + 2i / (n_cos − 1), row j is κ = κ_max · j / (n_kappa −
-//! 1) in 1/mm (row 0 a flat surface). Between nodes it is interpolated bilinearly; outside it is
-//! clamped (N·L to [−1, 1], κ to [0, κ_max]). Both axes are linear: the clamped cosine is linear in
-//! N·L (an odd n_cos puts its kink N·L = 0 on a node) and the blur σ = σ0 · κ is linear in κ.
-//! κ_max is [`KAPPA_MAX_FACTOR`] times the highest curvature the fit measured (its smallest sphere).
+//! on a grid of nodes: column i is N·L = −1 + 2i / (n_cos − 1), row j is κ = κ_max · j /
+//! (n_kappa − 1) in 1/mm (row 0 a flat surface). Between nodes it is interpolated bilinearly;
+//! outside it is clamped (N·L to [−1, 1], κ to [0, κ_max]). Both axes are linear: the clamped
+//! cosine is linear in N·L (an odd n_cos puts its kink N·L = 0 on a node) and the blur
+//! σ = σ0 · κ is linear in κ. κ_max is [`KAPPA_MAX_FACTOR`] times the highest curvature the fit
+//! measured (its smallest sphere).
 //!
 //! [`interpolation_error`] measures the table against the closed form at every cell's centre and
 //! edge midpoints; [`choose`] picks the smallest size of [`SIZES`] within a tolerance.

@@ -1132,13 +1132,19 @@ fn main() {
             e.exit()
         }
         Err(e) => {
-            // One line: clap's message without its usage block and hints.
+            // One line: clap's message (its lines joined) without its usage block and hints.
             let text = e.render().to_string();
-            let first = text
+            let message: Vec<&str> = text
                 .lines()
-                .find(|l| !l.trim().is_empty())
-                .unwrap_or("error: bad arguments");
-            eprintln!("{first}");
+                .take_while(|l| !l.starts_with("Usage:") && !l.trim_start().starts_with("tip:"))
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+                .collect();
+            if message.is_empty() {
+                eprintln!("error: bad arguments");
+            } else {
+                eprintln!("{}", message.join(" "));
+            }
             std::process::exit(2);
         }
     };

@@ -394,8 +394,9 @@ pub fn render_into(
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); n_bands];
     for (k, s) in setups.iter().enumerate() {
         if let Some(s) = s {
-            for b in (s.bbox[1] as usize / BAND)..=(s.bbox[3] as usize / BAND) {
-                bins[b].push(k as u32);
+            let (b0, b1) = (s.bbox[1] as usize / BAND, s.bbox[3] as usize / BAND);
+            for bin in &mut bins[b0..=b1] {
+                bin.push(k as u32);
             }
         }
     }
