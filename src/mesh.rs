@@ -101,7 +101,15 @@ impl Mesh {
             {
                 ns.iter().map(|v| v.normalize()).collect()
             }
-            _ => vertex_normals(&positions, &triangles),
+            _ => {
+                // Normals from the winding, turned outward: a mesh wound clockwise (negative
+                // enclosed volume) is flipped.
+                let mut ns = vertex_normals(&positions, &triangles);
+                if signed_volume(&positions, &triangles) < 0.0 {
+                    ns.iter_mut().for_each(|v| *v = -*v);
+                }
+                ns
+            }
         };
         Ok(Mesh {
             positions,
@@ -283,6 +291,19 @@ impl Mesh {
         }
         mean.abs()
     }
+}
+
+/// The volume a closed mesh encloses, positive when its triangles wind counter-clockwise seen
+/// from outside (for an open mesh, of the cone from the origin over it).
+pub fn signed_volume(positions: &[Vector3<f64>], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            a.dot(&b.cross(&c))
+        })
+        .sum::<f64>()
+        / 6.0
 }
 
 /// Angle-weighted vertex normals (orientation from the triangles' winding).

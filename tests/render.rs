@@ -180,6 +180,12 @@ fn obj_and_ply_load_the_same_mesh() {
         "{:?}",
         &k[..4]
     );
+    // Wound inside out, the computed normals still point outward.
+    let flipped: Vec<[u32; 3]> = m.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
+    let f = Mesh::new(m.positions.clone(), flipped, None, Path::new("flipped")).unwrap();
+    for (p, n) in f.positions.iter().zip(&f.normals) {
+        assert!(p.normalize().dot(n) > 0.99);
+    }
     // A quad face is split in two.
     std::fs::write(
         dir.path().join("q.ply"),
