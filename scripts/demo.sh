@@ -20,3 +20,13 @@ fi
 "$wb" detect datasets/demo
 # The joint fit: reuses detections.json (newer than its inputs) and the calibration.
 "$wb" solve --joint datasets/demo --plots datasets/demo/plots
+# Rendering with the measured CDRF: the table, the renderer checked against the fit's spheres,
+# and the Stanford bunny when ../shared has it.
+"$wb" lut datasets/demo/fit.json
+"$wb" render --check --fit datasets/demo/fit.json
+bunny=../shared/data/meshes/stanford-bunny.obj
+if [ -f "$bunny" ]; then
+  "$wb" render "$bunny" --unit m --fit datasets/demo/fit.json --out datasets/demo/bunny.png
+else
+  echo "$bunny absent: bunny render skipped"
+fi
