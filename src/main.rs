@@ -941,13 +941,15 @@ fn bench(a: BenchArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+/// `name` in the folder of `file`.
+fn beside(file: &std::path::Path, name: &str) -> PathBuf {
+    file.parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(name)
+}
+
 fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
-    let out = a.out.clone().unwrap_or_else(|| {
-        a.fit
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join("plots")
-    });
+    let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "plots"));
     let files = workbench::fitplot::replot(&a.fit, &out, quiet)
         .with_context(|| format!("plot {}", a.fit.display()))?;
     println!("figures  {} ({} files)", out.display(), files.len());
@@ -956,12 +958,7 @@ fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
 }
 
 fn lut(a: LutArgs) -> Result<()> {
-    let out = a.out.clone().unwrap_or_else(|| {
-        a.fit
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join("lut")
-    });
+    let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "lut"));
     let (t, fm, paths) = workbench::render_job::write_lut(
         &a.fit,
         &out,
@@ -998,12 +995,10 @@ fn lut(a: LutArgs) -> Result<()> {
 fn render(a: RenderArgs) -> Result<()> {
     let table = table_size(a.table, workbench::lut::DEFAULT_TOLERANCE);
     if a.check {
-        let dir = a.out.clone().unwrap_or_else(|| {
-            a.fit
-                .parent()
-                .unwrap_or(std::path::Path::new("."))
-                .join("render-check")
-        });
+        let dir = a
+            .out
+            .clone()
+            .unwrap_or_else(|| beside(&a.fit, "render-check"));
         let res = workbench::render_job::check(&a.fit, &dir, table)
             .with_context(|| format!("render --check {}", a.fit.display()))?;
         println!("sphere               radius  pixels  silhouette  rel. RMS   largest");

@@ -196,8 +196,8 @@ pub struct Shader<'a> {
     pub shading: Shading,
 }
 
-/// Exit transmission T(n·v) tabulated on this many intervals of n·v (linear interpolation; its
-/// largest error is below 1e-5 for η ≤ 2, see the tests).
+/// Exit transmission T(n·v) tabulated on this many intervals of n·v (linear interpolation: largest
+/// error 5–7·10⁻⁶ for η 1.2–2, see the tests).
 const FRESNEL_TABLE: usize = 1024;
 
 impl Shader<'_> {
@@ -633,8 +633,8 @@ mod tests {
                 let got = t[i] as f64 + (t[i + 1] - t[i]) as f64 * (x - i as f64);
                 worst = worst.max((got - crate::fresnel::transmission(c, eta)).abs());
             }
-            // Near grazing T rises steeply (∝ cos θ); elsewhere the table is far closer.
-            assert!(worst < 2e-3, "eta {eta}: {worst}");
+            // f32 values: 1.5e-5 covers the interpolation error (5–7e-6) and the rounding.
+            assert!(worst < 1.5e-5, "eta {eta}: {worst}");
         }
     }
 

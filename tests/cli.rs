@@ -1,19 +1,8 @@
 //! The binary: real runs, and bad input giving one clear line, a non-zero exit and no panic.
 
+mod common;
+use common::wb;
 use std::path::Path;
-use std::process::Command;
-
-fn wb(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_workbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn assert_clean_failure(args: &[&str], needle: &str) {
     let (code, _, err) = wb(args);

@@ -1,9 +1,10 @@
 //! `workbench lut` and `workbench render`: the table against the closed form, the renderer against
 //! the solver's own prediction of a sphere, mesh formats, and the command line.
 
+mod common;
+use common::wb;
 use nalgebra::Vector3;
 use std::path::Path;
-use std::process::Command;
 use workbench::lut::{FitMaterial, Lut};
 use workbench::mesh::{shapes, Mesh, Unit};
 use workbench::model::{LightAngles, Model};
@@ -22,18 +23,6 @@ fn wax() -> FitMaterial {
         },
         measured_kappa: [1.0 / 35.0, 1.0 / 15.0],
     }
-}
-
-fn wb(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_workbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// An ideal sphere mesh rendered through the table reproduces the radiance model on the exact

@@ -1,4 +1,5 @@
-//! Independent numerical tools for the tests: adaptive quadrature and finite differences.
+//! Independent numerical tools for the tests (adaptive quadrature, finite differences), shared
+//! data, and running the binary.
 #![allow(dead_code)]
 
 /// Gauss–Kronrod 7/15 on [a, b]: (Kronrod estimate, |Kronrod − Gauss|).
@@ -128,4 +129,17 @@ pub fn camera_320x240() -> workbench::camera::Camera {
     cam.cy = 119.6;
     cam.image_size = [320, 240];
     cam
+}
+
+/// Run the workbench binary: (exit code, stdout, stderr).
+pub fn wb(args: &[&str]) -> (i32, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
