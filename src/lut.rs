@@ -202,24 +202,28 @@ pub fn interpolation_error(lut: &Lut, model: &Model, material: &Material) -> Int
     }
 }
 
+/// A size tried by [`choose`] and its largest error over the peak.
+pub type Tried = ((usize, usize), f64);
+
 /// The smallest table of [`SIZES`] whose largest error is within `tolerance` of its peak (the
-/// largest size when none is), with its measured error.
+/// largest size when none is), with its measured error and every size tried with its relative
+/// error.
 pub fn choose(
     model: &Model,
     material: &Material,
     kappa_max: f64,
     tolerance: f64,
-) -> (Lut, InterpolationError) {
-    let mut last = None;
+) -> (Lut, InterpolationError, Vec<Tried>) {
+    let mut tried = Vec::new();
     for &(nc, nk) in &SIZES {
         let lut = Lut::build(model, material, nc, nk, kappa_max);
         let err = interpolation_error(&lut, model, material);
-        if err.max_rel <= tolerance {
-            return (lut, err);
+        tried.push(((nc, nk), err.max_rel));
+        if err.max_rel <= tolerance || (nc, nk) == SIZES[SIZES.len() - 1] {
+            return (lut, err, tried);
         }
-        last = Some((lut, err));
     }
-    last.expect("SIZES is not empty")
+    unreachable!("the last size always returns")
 }
 
 /// The model and material a fit describes, and the range of curvature it measured (1/mm).
@@ -472,7 +476,7 @@ mod tests {
     fn choose_meets_the_tolerance() {
         let model = Model::default();
         let m = material();
-        let (lut, err) = choose(&model, &m, 0.2, 2e-3);
+        let (lut, err, _) = choose(&model, &m, 0.2, 2e-3);
         assert!(err.max_rel <= 2e-3);
         // The size before it would not have met it.
         let k = SIZES

@@ -226,16 +226,25 @@ fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
     Ok((p(a)?, p(b)?))
 }
 
-fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
+/// "AxB" as two numbers (`what` names them in the error).
+fn parse_dims<T: std::str::FromStr>(
+    s: &str,
+    form: &str,
+    what: &str,
+) -> std::result::Result<(T, T), String> {
     let (a, b) = s
         .split_once('x')
-        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+        .ok_or_else(|| format!("expected {form}, got {s:?}"))?;
     let p = |t: &str| {
         t.trim()
-            .parse::<u32>()
-            .map_err(|_| format!("not a pixel count: {t:?}"))
+            .parse::<T>()
+            .map_err(|_| format!("not a {what}: {t:?}"))
     };
     Ok((p(a)?, p(b)?))
+}
+
+fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
+    parse_dims(s, "WIDTHxHEIGHT", "pixel count")
 }
 
 /// A table size: None for auto.
@@ -246,15 +255,7 @@ fn parse_table_size(s: &str) -> std::result::Result<TableArg, String> {
     if s == "auto" {
         return Ok(TableArg(None));
     }
-    let (a, b) = s
-        .split_once('x')
-        .ok_or_else(|| format!("expected auto or N_COSxN_KAPPA, got {s:?}"))?;
-    let p = |t: &str| {
-        t.trim()
-            .parse::<usize>()
-            .map_err(|_| format!("not a node count: {t:?}"))
-    };
-    Ok(TableArg(Some((p(a)?, p(b)?))))
+    parse_dims(s, "auto or N_COSxN_KAPPA", "node count").map(|d| TableArg(Some(d)))
 }
 
 fn table_size(size: TableArg, tolerance: f64) -> workbench::render_job::TableSize {

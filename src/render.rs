@@ -449,12 +449,12 @@ pub fn render_into(
                     let yb = (s.bbox[3] as usize).min(y0 + rows - 1);
                     let (xa, xb) = (s.bbox[0] as usize, s.bbox[2] as usize);
                     for py in ya..=yb {
-                        let mut l = s.bary(xa as f32, py as f32);
+                        let mut lam = s.bary(xa as f32, py as f32);
                         for px in xa..=xb {
-                            if l[0] >= margin[0] && l[1] >= margin[1] && l[2] >= margin[2] {
+                            if lam[0] >= margin[0] && lam[1] >= margin[1] && lam[2] >= margin[2] {
                                 let base = ((py - y0) * w + px) * ns;
                                 for (k, d) in delta.iter().enumerate() {
-                                    let bc = [l[0] + d[0], l[1] + d[1], l[2] + d[2]];
+                                    let bc = [lam[0] + d[0], lam[1] + d[1], lam[2] + d[2]];
                                     if bc[0] < 0.0 || bc[1] < 0.0 || bc[2] < 0.0 {
                                         continue;
                                     }
@@ -465,7 +465,7 @@ pub fn render_into(
                                     }
                                 }
                             }
-                            l = [l[0] + s.dx[0], l[1] + s.dx[1], l[2] + s.dx[2]];
+                            lam = [lam[0] + s.dx[0], lam[1] + s.dx[1], lam[2] + s.dx[2]];
                         }
                     }
                 }

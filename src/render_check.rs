@@ -126,14 +126,14 @@ pub fn compare(
     (cmp, rendered, predicted)
 }
 
-/// Every sphere of the fit's session, as the detector placed it (needs a perspective session:
-/// intrinsics and detections.json with sphere centres).
+/// Every sphere of the fit's session (`fit`, read from `fit_path`), as the detector placed it
+/// (needs a perspective session: intrinsics and detections.json with sphere centres).
 pub fn check_fit(
+    fit: &crate::solve::FitFile,
     fit_path: &Path,
     fm: &FitMaterial,
     lut: &Lut,
 ) -> Result<Vec<(SphereComparison, Image, Image)>> {
-    let fit: crate::solve::FitFile = crate::output::read_json(fit_path)?;
     let session = fit.session_path(fit_path)?;
     let report = crate::session::inspect(&session)?;
     let cam = report.camera.ok_or_else(|| {

@@ -30,7 +30,7 @@ pub struct Table {
     pub lut: Lut,
     pub error: InterpolationError,
     /// Sizes tried (auto) with their largest relative error.
-    pub tried: Vec<((usize, usize), f64)>,
+    pub tried: Vec<lut::Tried>,
     pub tolerance: Option<f64>,
     pub seconds: f64,
 }
@@ -61,19 +61,7 @@ pub fn table(fm: &FitMaterial, size: TableSize, kappa_max: Option<f64>) -> Resul
                     "--tolerance must be > 0, got {tol}"
                 )));
             }
-            let mut tried = Vec::new();
-            let mut chosen = None;
-            for &(nc, nk) in &lut::SIZES {
-                let l = Lut::build(&fm.model, &fm.material, nc, nk, kmax);
-                let e = lut::interpolation_error(&l, &fm.model, &fm.material);
-                tried.push(((nc, nk), e.max_rel));
-                let ok = e.max_rel <= tol;
-                chosen = Some((l, e));
-                if ok {
-                    break;
-                }
-            }
-            let (l, e) = chosen.expect("SIZES is not empty");
+            let (l, e, tried) = lut::choose(&fm.model, &fm.material, kmax, tol);
             (l, e, tried, Some(tol))
         }
     };
@@ -274,9 +262,7 @@ pub fn run(o: &RenderOptions) -> Result<RenderReport> {
     }
     let (_, fm) = lut::read_fit(&o.fit)?;
     let prep = prepare(&o.mesh, o.unit, o.object_size_mm)?;
-    let t1 = Instant::now();
     let table = table(&fm, o.table, None)?;
-    let table_s = t1.elapsed().as_secs_f64();
     let light = match o.light_deg {
         Some((a, e)) => LightAngles {
             azimuth: a.to_radians(),
@@ -310,7 +296,7 @@ pub fn run(o: &RenderOptions) -> Result<RenderReport> {
         exposure,
         load_s: prep.load_s,
         curvature_s: prep.curvature_s,
-        table_s,
+        table_s: table.seconds,
         frame_s,
         write_s,
     })
@@ -332,9 +318,9 @@ pub fn write_image(path: &Path, img: &Image, exposure: f64, tone: Tone, bits: u8
 /// the solver's prediction; writes `<dir>/sphere-check.json` and one picture per sphere
 /// (rendered | predicted | difference ×10, sRGB). Returns the comparisons.
 pub fn check(fit_path: &Path, dir: &Path, table_size: TableSize) -> Result<Vec<SphereComparison>> {
-    let (_, fm) = lut::read_fit(fit_path)?;
+    let (fit, fm) = lut::read_fit(fit_path)?;
     let t = table(&fm, table_size, None)?;
-    let results = render_check::check_fit(fit_path, &fm, &t.lut)?;
+    let results = render_check::check_fit(&fit, fit_path, &fm, &t.lut)?;
     let exposure = default_exposure(&t.lut, fm.material.eta);
     let mut out = Vec::new();
     for (cmp, rendered, predicted) in results {
