@@ -109,7 +109,8 @@ fn level_fit(l: &solve::Loaded, opts: &Options, reduction: Reduction) -> (f64, j
         start_sigma0: None,
         start_light: None,
         warm: None,
-        hold_light: false,
+        light_fit: joint::LightFit::Prior,
+        light_std: l.light_std,
     };
     let spheres: Vec<&workbench::observe::SphereData> = l.spheres.iter().collect();
     let t0 = Instant::now();

@@ -215,6 +215,44 @@ pub fn value(theta: f64, sigma: f64, conv: Convolution) -> f64 {
     eval(theta, sigma, conv).value
 }
 
+/// The CDRF with a kernel of two Gaussians, (1 − w)·f(θ; σ) + w·f(θ; s·σ): a weight w ∈ [0, 1)
+/// moved to a Gaussian s > 1 times wider (docs/kernel.md). Sums of Gaussians approximate
+/// diffusion profiles (a sharp core, a long tail); the blur is linear in its kernel, so the closed
+/// form and every derivative carry over term by term. w = 0 is the plain CDRF (one evaluation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MixtureEval {
+    /// Value and ∂/∂θ, ∂²/∂θ², ∂/∂σ (σ the core's width; the tail's is s·σ).
+    pub f: CdrfEval,
+    /// ∂f/∂w.
+    pub d_weight: f64,
+    /// ∂f/∂s.
+    pub d_ratio: f64,
+}
+
+/// [`MixtureEval`] at (θ, σ) for weight `w` and width ratio `s`.
+pub fn mixture(theta: f64, sigma: f64, w: f64, s: f64, conv: Convolution) -> MixtureEval {
+    let core = eval(theta, sigma, conv);
+    if w == 0.0 {
+        return MixtureEval {
+            f: core,
+            d_weight: 0.0,
+            d_ratio: 0.0,
+        };
+    }
+    let tail = eval(theta, s * sigma, conv);
+    let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
+    MixtureEval {
+        f: CdrfEval {
+            value: mix(core.value, tail.value),
+            d_theta: mix(core.d_theta, tail.d_theta),
+            d2_theta: mix(core.d2_theta, tail.d2_theta),
+            d_sigma: mix(core.d_sigma, s * tail.d_sigma),
+        },
+        d_weight: tail.value - core.value,
+        d_ratio: w * sigma * tail.d_sigma,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -515,6 +515,8 @@ pub fn short_name(name: &str) -> String {
         "light_elevation" => "light el",
         "sigma_exponent" => "q",
         "albedo_curvature" => "b",
+        "kernel_weight" => "w",
+        "kernel_ratio" => "s",
         other => other,
     }
     .to_string()

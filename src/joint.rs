@@ -40,6 +40,8 @@ pub const HUBER_K: f64 = 1.345;
 pub const ETA_PRIOR: (f64, f64) = (1.45, 0.05);
 /// Roughness held when the data cannot determine it.
 pub const ALPHA_PRIOR: f64 = 0.1;
+/// Start of the two-Gaussian kernel: tail weight and width ratio.
+pub const KERNEL_START: (f64, f64) = (0.2, 3.0);
 
 /// How many residuals the solver sees.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,19 +59,39 @@ pub enum Reduction {
 pub struct Extensions {
     pub sigma_exponent: bool,
     pub albedo_curvature: bool,
+    /// The blur kernel as two Gaussians ([`crate::cdrf::mixture`]).
+    #[serde(default)]
+    pub two_gaussian: bool,
 }
 
 impl Extensions {
     pub fn any(&self) -> bool {
-        self.sigma_exponent || self.albedo_curvature
+        self.sigma_exponent || self.albedo_curvature || self.two_gaussian
+    }
+
+    /// The extensions of a fit: those whose parameters were free.
+    pub fn of_fit(free: &[bool; N_PARAMS]) -> Extensions {
+        Extensions {
+            sigma_exponent: free[idx::SIGMA_EXPONENT],
+            albedo_curvature: free[idx::ALBEDO_CURVATURE],
+            two_gaussian: free[idx::KERNEL_WEIGHT],
+        }
     }
 
     pub fn name(&self) -> String {
-        match (self.sigma_exponent, self.albedo_curvature) {
-            (false, false) => "plain".into(),
-            (true, false) => "sigma-exponent".into(),
-            (false, true) => "albedo-curvature".into(),
-            (true, true) => "sigma-exponent+albedo-curvature".into(),
+        let parts: Vec<&str> = [
+            (self.two_gaussian, "two-gaussian"),
+            (self.sigma_exponent, "sigma-exponent"),
+            (self.albedo_curvature, "albedo-curvature"),
+        ]
+        .iter()
+        .filter(|p| p.0)
+        .map(|p| p.1)
+        .collect();
+        if parts.is_empty() {
+            "plain".into()
+        } else {
+            parts.join("+")
         }
     }
 }
@@ -97,8 +119,36 @@ pub struct Setup {
     /// A previous fit of the same scene to start from: the start-value search and the diffuse
     /// stage are skipped (used to refit subsets, e.g. for held-out errors).
     pub warm: Option<Params>,
-    /// Keep the light at the detector's estimate (or the given start) instead of refining it.
-    pub hold_light: bool,
+    /// How the photometric fit treats the light (see [`LightFit`]).
+    pub light_fit: LightFit,
+    /// The detector's standard error of its light (radians, the largest axis): the width of the
+    /// light's prior under [`LightFit::Prior`].
+    pub light_std: Option<f64>,
+}
+
+/// How the joint fit treats the light direction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LightFit {
+    /// The detector's light is a measurement: it enters as a Gaussian prior (its own standard
+    /// error on each angle, widened by [`LIGHT_PRIOR_FLOOR`]), and the shading may move it only as
+    /// far as the data support against that.
+    #[default]
+    Prior,
+    /// The light refined by the shading alone (no prior): the behaviour before the prior.
+    Free,
+    /// The light held at the detector's estimate (or the given start).
+    Hold,
+}
+
+impl LightFit {
+    pub fn name(&self) -> &'static str {
+        match self {
+            LightFit::Prior => "prior",
+            LightFit::Free => "free",
+            LightFit::Hold => "hold",
+        }
+    }
 }
 
 /// One stage's convergence record.
@@ -173,6 +223,9 @@ pub struct JointFit {
     pub specular: bool,
     /// Seconds spent in each phase (pooling, start values, stages, reduction choice).
     pub phases: Vec<(String, f64)>,
+    /// How far the fit moved the detector's light (when the light was free and a detector's
+    /// light with its error was given).
+    pub light_pull: Option<LightPull>,
 }
 
 /// The light from the shading alone (a start value when no highlight was found). Where the
@@ -334,9 +387,37 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     // Stage: diffuse, on 2° cells without the highlight.
     let mut free = [false; N_PARAMS];
     free[..6].fill(true);
-    free[idx::AZIMUTH] = !setup.hold_light;
-    free[idx::ELEVATION] = !setup.hold_light;
-    if setup.hold_light {
+    let hold_light = setup.light_fit == LightFit::Hold;
+    free[idx::AZIMUTH] = !hold_light;
+    free[idx::ELEVATION] = !hold_light;
+    // The detector's light as a prior on the two angles: isotropic with the detector's standard
+    // error (floored), so the azimuth's is that over cos(elevation).
+    let detector = setup.light.map(|l| LightAngles::from_direction(&l));
+    let light_prior_std = match (setup.light_fit, detector, setup.light_std) {
+        (LightFit::Prior, Some(_), Some(s)) if s.is_finite() => Some(s.max(LIGHT_PRIOR_FLOOR)),
+        _ => None,
+    };
+    let light_priors: Vec<Prior> = match (light_prior_std, detector) {
+        (Some(s), Some(d)) => vec![
+            Prior {
+                index: idx::AZIMUTH,
+                mean: d.azimuth,
+                std: s / d.elevation.cos().abs().max(1e-3),
+            },
+            Prior {
+                index: idx::ELEVATION,
+                mean: d.elevation,
+                std: s,
+            },
+        ],
+        _ => vec![],
+    };
+    if let Some(s) = light_prior_std {
+        let what = format!("prior: the detector's ± {:.4}°", s.to_degrees());
+        status[idx::AZIMUTH] = what.clone();
+        status[idx::ELEVATION] = what;
+    }
+    if hold_light {
         let why = if setup.start_light.is_some() {
             "fixed: as given"
         } else if setup.light.is_some() {
@@ -355,7 +436,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         let t = std::time::Instant::now();
         let cells = pooled.merged(8);
         let obs: Vec<Obs> = pooled.observations(&cells);
-        let (f, _, _) = solver::fit_robust(model, &obs, &p, free, &[], HUBER_K, 4);
+        let (f, _, _) = solver::fit_robust(model, &obs, &p, free, &light_priors, HUBER_K, 4);
         stages.push(Stage::of(
             "diffuse (2° cells, highlight left out)",
             obs.len(),
@@ -407,7 +488,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         notes.push("no usable highlight: specular lobe off (ks = 0)".into());
     }
     // The final parameter set.
-    let mut priors: Vec<Prior> = vec![];
+    let mut priors: Vec<Prior> = light_priors.clone();
     free[idx::KS] = specular && setup.irradiance.is_none();
     free[idx::ALPHA] = specular;
     free[idx::ETA] = true;
@@ -439,9 +520,28 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     }
     free[idx::SIGMA_EXPONENT] = ext.sigma_exponent;
     free[idx::ALBEDO_CURVATURE] = ext.albedo_curvature;
+    free[idx::KERNEL_WEIGHT] = ext.two_gaussian;
+    free[idx::KERNEL_RATIO] = ext.two_gaussian;
+    if ext.two_gaussian && p.material.kernel_weight == 0.0 {
+        // Start: a fifth of the weight in a tail three times wider, the core narrowed so that
+        // the kernel's variance stays the plain fit's: σ² = (1 − w + w·s²)·σ_core².
+        let (w, s) = (KERNEL_START.0, KERNEL_START.1);
+        let shrink = (1.0 - w + w * s * s).sqrt();
+        p.material.kernel_weight = w;
+        p.material.kernel_ratio = s;
+        for v in p.material.sigma0_mm.iter_mut() {
+            *v /= shrink;
+        }
+    }
+    if !ext.two_gaussian {
+        p.material.kernel_weight = 0.0;
+        p.material.kernel_ratio = 0.0;
+    }
     for (k, on) in [
         (idx::SIGMA_EXPONENT, ext.sigma_exponent),
         (idx::ALBEDO_CURVATURE, ext.albedo_curvature),
+        (idx::KERNEL_WEIGHT, ext.two_gaussian),
+        (idx::KERNEL_RATIO, ext.two_gaussian),
     ] {
         if !on {
             status[k] = "off".into();
@@ -589,6 +689,19 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
                     status[k] = format!("off: not determined (free fit: ± {:.3})", f.std[k]);
                     notes.push(format!("{} is not determined: off", PARAM_NAMES[k]));
                 }
+                idx::KERNEL_WEIGHT | idx::KERNEL_RATIO => {
+                    if !free[idx::KERNEL_WEIGHT] {
+                        continue;
+                    }
+                    free[idx::KERNEL_WEIGHT] = false;
+                    free[idx::KERNEL_RATIO] = false;
+                    status[idx::KERNEL_WEIGHT] =
+                        format!("off: not determined (free fit: ± {:.3})", f.std[k]);
+                    status[idx::KERNEL_RATIO] = "off".into();
+                    notes.push(
+                        "the kernel's shape is not determined: one Gaussian".into(),
+                    );
+                }
                 _ => {
                     notes.push(format!(
                         "{} is poorly determined (std {:.3} for {:.4})",
@@ -604,6 +717,16 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             }
             if k == idx::ALBEDO_CURVATURE {
                 p.material.albedo_curvature = 0.0;
+            }
+            if k == idx::KERNEL_WEIGHT || k == idx::KERNEL_RATIO {
+                // Back to one Gaussian of the mixture's width.
+                let m = f.params.material;
+                let grow = (1.0 - m.kernel_weight
+                    + m.kernel_weight * m.kernel_ratio * m.kernel_ratio)
+                    .sqrt();
+                p.material.sigma0_mm = m.sigma0_mm.map(|v| v * grow);
+                p.material.kernel_weight = 0.0;
+                p.material.kernel_ratio = 0.0;
             }
             changed = true;
         }
@@ -735,6 +858,34 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             fit.params.material.eta, fit.std[idx::ETA]
         ));
     }
+    // How far the shading pulled the light from the detector's, in the detector's errors.
+    let light_pull = match (detector, setup.light_std) {
+        (Some(d), Some(s)) if free[idx::AZIMUTH] && s > 0.0 => {
+            let moved = fit.params.light.direction().angle(&d.direction());
+            Some(LightPull {
+                moved_deg: moved.to_degrees(),
+                detector_std_deg: s.to_degrees(),
+                prior_std_deg: light_prior_std.map(f64::to_degrees),
+                pull: moved / light_prior_std.unwrap_or(s),
+            })
+        }
+        _ => None,
+    };
+    if let Some(lp) = &light_pull {
+        if lp.pull > PULL_WARN {
+            notes.push(format!(
+                "the shading pulls the light {:.3}° from the highlights' estimate ({:.1} times its ± {:.4}°): the model does not describe the shading fully{}",
+                lp.moved_deg,
+                lp.pull,
+                lp.prior_std_deg.unwrap_or(lp.detector_std_deg),
+                if light_prior_std.is_some() {
+                    ""
+                } else {
+                    "; σ0 moves with the light — without --free-light the detector's light is a prior"
+                }
+            ));
+        }
+    }
     for k in 0..N_PARAMS {
         if !free[k] && status[k] == "fitted" {
             status[k] = "fixed".into();
@@ -756,8 +907,28 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         notes,
         status,
         specular,
+        light_pull,
     }
 }
+
+/// The light's move from the detector's estimate in the joint fit.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightPull {
+    /// Angle between the fitted light and the detector's (degrees).
+    pub moved_deg: f64,
+    /// The detector's standard error (degrees).
+    pub detector_std_deg: f64,
+    /// The prior's width (degrees; null without a prior, `--free-light`).
+    pub prior_std_deg: Option<f64>,
+    /// `moved_deg` over the prior's width (or the detector's error without one).
+    pub pull: f64,
+}
+
+/// A pull of the light beyond this many standard errors gets a note.
+pub const PULL_WARN: f64 = 3.0;
+/// Floor on the light prior's width (radians): the detector's modelling error that its own
+/// statistics do not see.
+pub const LIGHT_PRIOR_FLOOR: f64 = crate::detect::LIGHT_FLOOR;
 
 /// A light closer than this to the viewing direction (degrees) gets a note: θ ≈ φ.
 pub const NEAR_VIEW_DEG: f64 = 15.0;

@@ -93,8 +93,8 @@ struct SolveArgs {
     /// Plain least squares instead of the Huber loss.
     #[arg(long)]
     no_robust: bool,
-    /// Model extensions: none, auto (chosen by held-out error; needs 4 or more radii),
-    /// sigma-exponent, albedo-curvature, or both (comma-separated).
+    /// Model extensions: none, auto (chosen by held-out error; needs 4 or more radii), or any of
+    /// sigma-exponent, albedo-curvature, two-gaussian (comma-separated; both = the first two).
     #[arg(long, default_value = "none", value_parser = parse_extensions)]
     extensions: workbench::solve::ExtensionChoice,
     /// Start σ0 (mm), one value or r,g,b, instead of the search over the data.
@@ -107,8 +107,15 @@ struct SolveArgs {
     #[arg(long)]
     redetect: bool,
     /// Keep the light at the detector's estimate (or --start-light) instead of refining it.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "free_light")]
     hold_light: bool,
+    /// Skip the leave-one-radius-out refits (the standard errors are then the formal ones).
+    #[arg(long)]
+    no_jackknife: bool,
+    /// Refine the light from the shading alone, without the detector's light as a prior (the
+    /// default uses it as one).
+    #[arg(long)]
+    free_light: bool,
     /// Write figures (PNG and SVG) and index.html into this folder; runs --baseline too.
     #[arg(long)]
     plots: Option<PathBuf>,
@@ -320,6 +327,7 @@ fn parse_extensions(s: &str) -> std::result::Result<workbench::solve::ExtensionC
             return Ok(ExtensionChoice::On(Extensions {
                 sigma_exponent: true,
                 albedo_curvature: true,
+                two_gaussian: false,
             }))
         }
         _ => {}
@@ -329,9 +337,10 @@ fn parse_extensions(s: &str) -> std::result::Result<workbench::solve::ExtensionC
         match part.trim() {
             "sigma-exponent" => e.sigma_exponent = true,
             "albedo-curvature" => e.albedo_curvature = true,
+            "two-gaussian" => e.two_gaussian = true,
             other => {
                 return Err(format!(
-                    "unknown extension {other:?} (sigma-exponent, albedo-curvature)"
+                    "unknown extension {other:?} (sigma-exponent, albedo-curvature, two-gaussian)"
                 ))
             }
         }
@@ -485,6 +494,12 @@ struct SessionArgs {
     /// Model extension b: albedo·exp(b·(25 mm/r − 1)) (0: one albedo for all radii).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     albedo_curvature: f64,
+    /// The kernel's tail weight w: (1 − w)·f(θ; σ) + w·f(θ; s·σ) (0: one Gaussian).
+    #[arg(long, default_value_t = 0.0)]
+    kernel_weight: f64,
+    /// The kernel's tail width ratio s (> 1; used when --kernel-weight is not 0).
+    #[arg(long, default_value_t = 3.0)]
+    kernel_ratio: f64,
     /// Material name written into session.json.
     #[arg(long, default_value = "synthetic wax")]
     material: String,
@@ -592,6 +607,12 @@ struct CheckerArgs {
 }
 
 fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
+    if !(0.0..1.0).contains(&a.kernel_weight) {
+        bail!("--kernel-weight must lie in [0, 1), got {}", a.kernel_weight);
+    }
+    if a.kernel_weight > 0.0 && !(a.kernel_ratio > 1.0 && a.kernel_ratio.is_finite()) {
+        bail!("--kernel-ratio must be a number above 1, got {}", a.kernel_ratio);
+    }
     let cfg = SessionConfig {
         radii_mm: a.radii,
         layout: match a.layout {
@@ -613,6 +634,12 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
             },
             sigma_exponent: a.sigma_exponent,
             albedo_curvature: a.albedo_curvature,
+            kernel_weight: a.kernel_weight,
+            kernel_ratio: if a.kernel_weight > 0.0 {
+                a.kernel_ratio
+            } else {
+                0.0
+            },
         },
         material_name: a.material,
         exposure: a.exposure,
@@ -901,7 +928,14 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         elevation: el.to_radians(),
     });
     o.redetect = a.redetect;
-    o.hold_light = a.hold_light;
+    o.light_fit = if a.hold_light {
+        workbench::joint::LightFit::Hold
+    } else if a.free_light {
+        workbench::joint::LightFit::Free
+    } else {
+        workbench::joint::LightFit::Prior
+    };
+    o.jackknife = !a.no_jackknife;
     o.plots = a.plots.clone();
     o.baseline = a.baseline;
     o.quiet = quiet;

@@ -11,6 +11,10 @@
 //! q (`sigma_exponent`) and b (`albedo_curvature`) are extensions of the plain CDRF (both 0):
 //! q > 0 makes σ·r grow as r shrinks, b > 0 makes small spheres brighter. The reference radius
 //! r_ref ([`Model::reference_radius_mm`]) is where σ0 and the albedo keep their plain meaning.
+//!
+//! The kernel's shape (`kernel_weight` w, `kernel_ratio` s) is the third extension: the blur is a
+//! sum of two Gaussians, f → (1 − w)·f(θ; σ_c) + w·f(θ; s·σ_c) ([`cdrf::mixture`]), one shape
+//! shared by the channels, each channel's width scaled by its σ0 (w = 0: the plain Gaussian).
 
 use crate::cdrf::{self, Convolution};
 use crate::fresnel;
@@ -19,8 +23,8 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Number of model parameters: σ0 ×3, albedo ×3, η, ks, α, light azimuth, light elevation,
-/// and the two extensions q and b.
-pub const N_PARAMS: usize = 13;
+/// the two extensions q and b, and the kernel's weight and width ratio.
+pub const N_PARAMS: usize = 15;
 /// Parameter indices into a gradient row.
 pub mod idx {
     pub const SIGMA0: usize = 0; // .. 3
@@ -32,6 +36,8 @@ pub mod idx {
     pub const ELEVATION: usize = 10;
     pub const SIGMA_EXPONENT: usize = 11;
     pub const ALBEDO_CURVATURE: usize = 12;
+    pub const KERNEL_WEIGHT: usize = 13;
+    pub const KERNEL_RATIO: usize = 14;
 }
 /// Human-readable parameter names, in index order.
 pub const PARAM_NAMES: [&str; N_PARAMS] = [
@@ -48,6 +54,8 @@ pub const PARAM_NAMES: [&str; N_PARAMS] = [
     "light_elevation",
     "sigma_exponent",
     "albedo_curvature",
+    "kernel_weight",
+    "kernel_ratio",
 ];
 
 /// Material parameters, named as in `truth.json` and `fit.json`.
@@ -66,6 +74,12 @@ pub struct Material {
     /// Extension b: albedo · exp(b · (r_ref / r − 1)) (0: the same albedo at every radius).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub albedo_curvature: f64,
+    /// The kernel's tail weight w ∈ [0, 1) (0: one Gaussian).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub kernel_weight: f64,
+    /// The tail's width over the core's, s > 1 (unused when w = 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub kernel_ratio: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -138,6 +152,8 @@ impl Params {
                 },
                 sigma_exponent: 0.0,
                 albedo_curvature: 0.0,
+                kernel_weight: 0.0,
+                kernel_ratio: 0.0,
             },
             light,
         }
@@ -159,6 +175,8 @@ impl Params {
             self.light.elevation,
             m.sigma_exponent,
             m.albedo_curvature,
+            m.kernel_weight,
+            m.kernel_ratio,
         ]
     }
 
@@ -174,6 +192,8 @@ impl Params {
                 },
                 sigma_exponent: p[11],
                 albedo_curvature: p[12],
+                kernel_weight: p[13],
+                kernel_ratio: p[14],
             },
             light: LightAngles {
                 azimuth: p[9],
@@ -238,7 +258,18 @@ impl Model {
     pub fn diffuse(&self, m: &Material, cos_theta: f64, kappa: f64) -> Rgb {
         let theta = cos_theta.clamp(-1.0, 1.0).acos();
         let (sigma, albedo) = self.diffuse_terms(m, kappa);
-        std::array::from_fn(|c| albedo[c] * cdrf::value(theta, sigma[c], self.convolution))
+        std::array::from_fn(|c| albedo[c] * self.profile(m, theta, sigma[c]).f.value)
+    }
+
+    /// The blur profile at θ for a core width σ: the plain CDRF or the two-Gaussian kernel.
+    pub fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
+        cdrf::mixture(
+            theta,
+            sigma,
+            m.kernel_weight,
+            m.kernel_ratio,
+            self.convolution,
+        )
     }
 
     /// RGB radiance at one surface point.
@@ -285,7 +316,8 @@ impl Model {
         };
         for c in 0..3 {
             let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
-            let f = cdrf::eval(theta, sigma, self.convolution);
+            let mix = self.profile(m, theta, sigma);
+            let f = mix.f;
             let a = m.albedo[c] * albedo_scale;
             out[c] = a * t_exit * f.value + spec.value;
             if !want_grad {
@@ -299,6 +331,8 @@ impl Model {
             row[idx::ALPHA] = spec.d_alpha;
             row[idx::SIGMA_EXPONENT] = a * t_exit * f.d_sigma * sigma * ln_rr;
             row[idx::ALBEDO_CURVATURE] = a * t_exit * f.value * (rr - 1.0);
+            row[idx::KERNEL_WEIGHT] = a * t_exit * mix.d_weight;
+            row[idx::KERNEL_RATIO] = a * t_exit * mix.d_ratio;
             // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
             let d_nl = a * t_exit * f.d_cos(theta) + spec.d_nl;
             let dl = g.normal * d_nl + g.view * spec.d_lv;

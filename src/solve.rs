@@ -10,7 +10,9 @@
 
 use crate::detect::{self, Detections};
 use crate::error::{Error, Result};
-use crate::joint::{self, Extensions, JointFit, Level, Prediction, Reduction, Setup, Stage};
+use crate::joint::{
+    self, Extensions, JointFit, Level, LightFit, LightPull, Prediction, Reduction, Setup, Stage,
+};
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use crate::observe::{self, SphereData};
 use crate::outline::Projection;
@@ -59,8 +61,11 @@ pub struct Options {
     pub start_light: Option<LightAngles>,
     /// Run detection even when detections.json is up to date.
     pub redetect: bool,
-    /// Keep the light at the detector's estimate.
-    pub hold_light: bool,
+    /// How the fit treats the detector's light (prior, free, held).
+    pub light_fit: LightFit,
+    /// Refit with each radius left out in turn: the jackknife spread of every parameter joins its
+    /// standard error, and each left-out radius is predicted (needs 3 or more radii).
+    pub jackknife: bool,
     pub plots: Option<PathBuf>,
     /// Run the paper's baseline beside a joint fit (also when `plots` is set: its curves are drawn).
     pub baseline: bool,
@@ -82,7 +87,8 @@ impl Options {
             start_sigma0: None,
             start_light: None,
             redetect: false,
-            hold_light: false,
+            light_fit: LightFit::Prior,
+            jackknife: true,
             plots: None,
             baseline: false,
             quiet: true,
@@ -108,6 +114,15 @@ pub struct StdJson {
     pub light_deg: f64,
     pub sigma_exponent: Option<f64>,
     pub albedo_curvature: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelJson>,
+}
+
+/// The two-Gaussian kernel: (1 − weight)·f(θ; σ) + weight·f(θ; ratio·σ).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KernelJson {
+    pub weight: f64,
+    pub ratio: f64,
 }
 
 /// One parameter, flat.
@@ -115,7 +130,14 @@ pub struct StdJson {
 pub struct ParamJson {
     pub name: String,
     pub value: f64,
+    /// The standard error stated: see `FitFile::std_source`.
     pub std: f64,
+    /// From σ²(JᵀJ)⁻¹ (noise only, the model taken as exact).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_formal: Option<f64>,
+    /// The leave-one-radius-out jackknife spread (model error across radii included).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_jackknife: Option<f64>,
     /// "fitted", "fixed", "prior …", "off: …".
     pub status: String,
 }
@@ -162,6 +184,117 @@ pub struct HoldoutJson {
     pub rel_rmse: f64,
     pub lit_rel_rmse: f64,
     pub unlit_rel_rmse: f64,
+}
+
+/// The jackknife's refits pool pixels in cells of this many × 0.25° at least.
+pub const JACKKNIFE_CELLS: u32 = 8;
+
+/// The leave-one-radius-out refits of a joint fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JackknifeJson {
+    /// The radii left out in turn (mm).
+    pub radii: Vec<f64>,
+    /// Each left-out radius predicted by the fit to the others.
+    pub heldout: Vec<HoldoutJson>,
+    /// Pixel-weighted mean of the held-out relative RMSE.
+    pub heldout_rel_rmse: f64,
+    /// Every refit converged.
+    pub converged: bool,
+    pub seconds: f64,
+}
+
+/// The jackknife spread of each parameter (0 where not free in the full fit) and its record.
+pub struct Jackknife {
+    pub std: [f64; N_PARAMS],
+    pub json: JackknifeJson,
+}
+
+/// Leave-one-radius-out refits of a joint fit: the fit is repeated with every radius left out in
+/// turn (warm-started from the full fit, at its reduction level), and the spread of the n refits
+/// gives each parameter's jackknife standard error √((n−1)/n · Σ(θᵢ − θ̄)²). It sees what the
+/// noise alone does not: a model that fits each radius a little differently. Each left-out
+/// radius is predicted by the fit to the others. `None` with fewer than 3 radii.
+pub fn jackknife(
+    opts: &Options,
+    l: &Loaded,
+    fitted: &[&SphereData],
+    jf: &JointFit,
+    ext: Extensions,
+) -> Option<Jackknife> {
+    use rayon::prelude::*;
+    let t = Instant::now();
+    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
+    radii.sort_by(|a, b| b.total_cmp(a));
+    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    if radii.len() < 3 {
+        return None;
+    }
+    // The refits compare errors of percents between subsets, not of standard errors: 2° cells
+    // (or the full fit's level when coarser).
+    let reduction = Reduction::Factor(
+        ((jf.chosen.width_deg / 0.25).round() as u32).max(JACKKNIFE_CELLS),
+    );
+    let runs: Vec<(Params, bool, HoldoutJson)> = radii
+        .par_iter()
+        .map(|&r| {
+            let same = |s: &&&SphereData| (s.radius_mm - r).abs() < 1e-9;
+            let train: Vec<&SphereData> = fitted.iter().filter(|s| !same(s)).copied().collect();
+            let test: Vec<&SphereData> = fitted.iter().filter(same).copied().collect();
+            let mut su = setup(opts, l, ext, reduction);
+            su.warm = Some(jf.fit.params);
+            let f = joint::fit_joint(&su, &train);
+            let preds: Vec<Prediction> = test
+                .iter()
+                .map(|s| joint::predict(&f.model, &f.fit.params, s, PREDICT_PIXELS))
+                .collect();
+            (f.fit.params, f.fit.converged, combine_predictions(r, &preds))
+        })
+        .collect();
+    let n = runs.len() as f64;
+    let values: Vec<[f64; N_PARAMS]> = runs.iter().map(|r| r.0.to_vec()).collect();
+    let std = std::array::from_fn(|k| {
+        if !jf.fit.free[k] {
+            return 0.0;
+        }
+        let mean = values.iter().map(|v| v[k]).sum::<f64>() / n;
+        ((n - 1.0) / n * values.iter().map(|v| (v[k] - mean).powi(2)).sum::<f64>()).sqrt()
+    });
+    let heldout: Vec<HoldoutJson> = runs.iter().map(|r| r.2.clone()).collect();
+    let w: f64 = heldout.iter().map(|h| h.pixels as f64).sum::<f64>().max(1.0);
+    Some(Jackknife {
+        std,
+        json: JackknifeJson {
+            heldout_rel_rmse: heldout
+                .iter()
+                .map(|h| h.rel_rmse * h.pixels as f64)
+                .sum::<f64>()
+                / w,
+            radii,
+            heldout,
+            converged: runs.iter().all(|r| r.1),
+            seconds: t.elapsed().as_secs_f64(),
+        },
+    })
+}
+
+/// Predictions of the spheres of one radius combined (pixel-weighted RMS of each error).
+fn combine_predictions(radius_mm: f64, preds: &[Prediction]) -> HoldoutJson {
+    let n: f64 = preds.iter().map(|p| p.pixels as f64).sum::<f64>().max(1.0);
+    let comb = |f: fn(&Prediction) -> f64| {
+        (preds
+            .iter()
+            .map(|p| f(p).powi(2) * p.pixels as f64)
+            .sum::<f64>()
+            / n)
+            .sqrt()
+    };
+    HoldoutJson {
+        radius_mm,
+        pixels: preds.iter().map(|p| p.pixels).sum(),
+        rel_rmse: comb(|p| p.rel_rmse),
+        lit_rel_rmse: comb(|p| p.lit_rel_rmse),
+        unlit_rel_rmse: comb(|p| p.unlit_rel_rmse),
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -211,6 +344,9 @@ pub struct Timings {
     pub solve_s: f64,
     pub model_choice_s: f64,
     pub holdout_s: f64,
+    /// The leave-one-radius-out refits.
+    #[serde(default)]
+    pub jackknife_s: f64,
     pub total_s: f64,
     /// The solve stage's phases (joint method), seconds.
     #[serde(default)]
@@ -236,8 +372,22 @@ pub struct FitFile {
     /// The extensions' values when on (see `model`), with the reference radius.
     pub sigma_exponent: Option<f64>,
     pub albedo_curvature: Option<f64>,
+    /// The kernel's shape when it is two Gaussians (null: one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelJson>,
     pub reference_radius_mm: f64,
     pub std: StdJson,
+    /// What `std` is: "formal" (σ²(JᵀJ)⁻¹) or "larger of formal and jackknife" per parameter.
+    #[serde(default)]
+    pub std_source: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jackknife: Option<JackknifeJson>,
+    /// How the light was treated: "prior" (the detector's light as a prior), "free", "hold".
+    #[serde(default)]
+    pub light_fit: String,
+    /// How far the fit moved the detector's light, in the prior's (or detector's) errors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_pull: Option<LightPull>,
     pub parameters: Vec<ParamJson>,
     pub correlation: CorrelationJson,
     pub rmse: RmseJson,
@@ -379,6 +529,8 @@ pub struct Loaded {
     pub proj: Projection,
     pub spheres: Vec<SphereData>,
     pub light: Option<Vector3<f64>>,
+    /// The detector's standard error of the light (radians).
+    pub light_std: Option<f64>,
     pub highlight_radius: Option<f64>,
     pub alpha: Option<f64>,
     pub skipped: Vec<String>,
@@ -499,6 +651,7 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
     };
     timings.detect_s = t1.elapsed().as_secs_f64();
     let light = detections.light_direction.map(Vector3::from);
+    let light_std = detections.light_std_deg.map(f64::to_radians);
     let hl: Vec<&detect::HighlightJson> = detections
         .images
         .iter()
@@ -536,6 +689,7 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
         proj,
         spheres: obs.spheres,
         light,
+        light_std,
         highlight_radius,
         alpha,
         skipped,
@@ -557,7 +711,8 @@ fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> S
         start_sigma0: opts.start_sigma0,
         start_light: opts.start_light,
         warm: None,
-        hold_light: opts.hold_light,
+        light_fit: opts.light_fit,
+        light_std: l.light_std,
     }
 }
 
@@ -570,20 +725,19 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
     let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
     radii.sort_by(|a, b| a.total_cmp(b));
     radii.dedup();
+    // Simplest first: one extension (the kernel's shape first), then pairs.
+    let ext = |two_gaussian, sigma_exponent, albedo_curvature| Extensions {
+        sigma_exponent,
+        albedo_curvature,
+        two_gaussian,
+    };
     let candidates = [
         Extensions::default(),
-        Extensions {
-            sigma_exponent: true,
-            albedo_curvature: false,
-        },
-        Extensions {
-            sigma_exponent: false,
-            albedo_curvature: true,
-        },
-        Extensions {
-            sigma_exponent: true,
-            albedo_curvature: true,
-        },
+        ext(true, false, false),
+        ext(false, true, false),
+        ext(false, false, true),
+        ext(true, false, true),
+        ext(false, true, true),
     ];
     if radii.len() < 4 {
         return ModelChoice {
@@ -638,7 +792,7 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
         .collect();
     let plain = results[0].heldout_rel_rmse;
     // The best, or the simplest candidate within 1% of the best's error (candidates are listed
-    // simplest first, and the two single extensions before the pair).
+    // simplest first, the single extensions before the pairs).
     let lowest = results
         .iter()
         .filter(|c| c.converged)
@@ -677,7 +831,7 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
 /// The options that decide a fit's result (not where it is written, nor progress display).
 pub fn fingerprint(opts: &Options) -> String {
     format!(
-        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | hold light {} | baseline {}",
+        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | baseline {}",
         env!("CARGO_PKG_VERSION"),
         opts.method,
         opts.holdout,
@@ -688,7 +842,8 @@ pub fn fingerprint(opts: &Options) -> String {
         opts.extensions,
         opts.start_sigma0,
         opts.start_light.map(|l| (l.azimuth, l.elevation)),
-        opts.hold_light,
+        opts.light_fit.name(),
+        opts.jackknife,
         opts.baseline || opts.plots.is_some()
     )
 }
@@ -760,6 +915,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     struct Outcome {
         params: Params,
         std: [f64; N_PARAMS],
+        std_formal: [f64; N_PARAMS],
+        jackknife: Option<Jackknife>,
         status: [String; N_PARAMS],
         free: [bool; N_PARAMS],
         correlation: nalgebra::DMatrix<f64>,
@@ -769,6 +926,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         convergence: ConvergenceJson,
         per_radius: Option<Vec<RadiusFit>>,
         paper: Option<paper::PaperFit>,
+        light_pull: Option<LightPull>,
     }
     let outcome = match opts.method {
         Method::Joint => {
@@ -786,6 +944,21 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
             };
             let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            let jack = if opts.jackknife {
+                let fitted_ext = Extensions::of_fit(&jf.fit.free);
+                let j = jackknife(opts, &l, &fitted, &jf, fitted_ext);
+                if j.is_none() {
+                    l.skipped.push(
+                        "jackknife: fewer than 3 radii, the standard errors are the formal ones"
+                            .into(),
+                    );
+                }
+                j
+            } else {
+                l.skipped
+                    .push("jackknife: off (--no-jackknife), the standard errors are the formal ones".into());
+                None
+            };
             // The paper's baseline beside it, for the figures and a comparison.
             let want = opts.baseline || opts.plots.is_some();
             if let (true, Some(light)) = (want, l.light) {
@@ -832,15 +1005,17 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             }
             Outcome {
                 params: jf.fit.params,
-                std: jf.fit.std,
+                std: match &jack {
+                    Some(j) => std::array::from_fn(|k| jf.fit.std[k].max(j.std[k])),
+                    None => jf.fit.std,
+                },
+                std_formal: jf.fit.std,
+                jackknife: jack,
                 status: jf.status.clone(),
                 free: jf.fit.free,
                 correlation: jf.fit.correlation.clone(),
                 specular: jf.specular,
-                extensions: Extensions {
-                    sigma_exponent: jf.fit.free[idx::SIGMA_EXPONENT],
-                    albedo_curvature: jf.fit.free[idx::ALBEDO_CURVATURE],
-                },
+                extensions: Extensions::of_fit(&jf.fit.free),
                 reduction: Some(ReductionJson {
                     setting,
                     pixels: jf.pixels,
@@ -858,6 +1033,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 },
                 per_radius: None,
                 paper: None,
+                light_pull: jf.light_pull,
             }
         }
         Method::Paper => {
@@ -890,6 +1066,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             Outcome {
                 params: pf.params,
                 std: pf.std,
+                std_formal: pf.std,
+                jackknife: None,
                 status,
                 free,
                 // Separate fits per radius: no joint covariance to report.
@@ -905,11 +1083,14 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 },
                 per_radius: Some(pf.per_radius.clone()),
                 paper: Some(pf),
+                light_pull: None,
             }
         }
     };
+    l.timings.jackknife_s = outcome.jackknife.as_ref().map_or(0.0, |j| j.json.seconds);
     l.timings.solve_s = t_solve.elapsed().as_secs_f64()
         - l.timings.model_choice_s
+        - l.timings.jackknife_s
         - baseline.as_ref().map_or(0.0, |b: &BaselineJson| b.seconds);
     pb.inc(1);
     // Predictions per sphere (the held-out one included).
@@ -1012,6 +1193,10 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             .extensions
             .albedo_curvature
             .then_some(m.albedo_curvature),
+        kernel: outcome.extensions.two_gaussian.then_some(KernelJson {
+            weight: m.kernel_weight,
+            ratio: m.kernel_ratio,
+        }),
         reference_radius_mm: model.reference_radius_mm,
         std: StdJson {
             sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
@@ -1030,12 +1215,28 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 .extensions
                 .albedo_curvature
                 .then_some(outcome.std[idx::ALBEDO_CURVATURE]),
+            kernel: outcome.extensions.two_gaussian.then_some(KernelJson {
+                weight: outcome.std[idx::KERNEL_WEIGHT],
+                ratio: outcome.std[idx::KERNEL_RATIO],
+            }),
         },
+        std_source: match &outcome.jackknife {
+            Some(_) => "larger of formal and jackknife".into(),
+            None => "formal".into(),
+        },
+        jackknife: outcome.jackknife.as_ref().map(|j| j.json.clone()),
+        light_fit: match opts.method {
+            Method::Joint => opts.light_fit.name().into(),
+            Method::Paper => LightFit::Hold.name().into(),
+        },
+        light_pull: outcome.light_pull,
         parameters: (0..N_PARAMS)
             .map(|k| ParamJson {
                 name: PARAM_NAMES[k].into(),
                 value: p.to_vec()[k],
                 std: outcome.std[k],
+                std_formal: outcome.jackknife.as_ref().map(|_| outcome.std_formal[k]),
+                std_jackknife: outcome.jackknife.as_ref().map(|j| j.std[k]),
                 status: outcome.status[k].clone(),
             })
             .collect(),
@@ -1150,11 +1351,25 @@ pub fn summary(f: &FitFile) -> String {
         f.std.light_deg,
         status("light_azimuth")
     );
+    if let Some(lp) = &f.light_pull {
+        let _ = writeln!(
+            s,
+            "         moved {:.3}° from the detector's light (± {:.4}°): pull {:.1}",
+            lp.moved_deg, lp.detector_std_deg, lp.pull
+        );
+    }
     if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
         let _ = writeln!(
             s,
             "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)",
             f.reference_radius_mm
+        );
+    }
+    if let (Some(k), Some(e)) = (f.kernel, f.std.kernel) {
+        let _ = writeln!(
+            s,
+            "kernel   two Gaussians: weight {:.4} ± {:.4} in a tail {:.3} ± {:.3} times wider",
+            k.weight, e.weight, k.ratio, e.ratio
         );
     }
     if let (Some(b), Some(e)) = (f.albedo_curvature, f.std.albedo_curvature) {
@@ -1206,6 +1421,20 @@ pub fn summary(f: &FitFile) -> String {
             if sp.held_out { "  HELD OUT" } else { "" }
         );
     }
+    if let Some(j) = &f.jackknife {
+        let per: Vec<String> = j
+            .heldout
+            .iter()
+            .map(|h| format!("{} mm {:.2}%", h.radius_mm, 100.0 * h.rel_rmse))
+            .collect();
+        let _ = writeln!(
+            s,
+            "jackknife each radius left out and predicted: {} (mean {:.2}%); std = {}",
+            per.join(", "),
+            100.0 * j.heldout_rel_rmse,
+            f.std_source
+        );
+    }
     if let Some(h) = &f.holdout {
         let _ = writeln!(
             s,
@@ -1246,7 +1475,7 @@ pub fn summary(f: &FitFile) -> String {
     let t = &f.timings;
     let _ = writeln!(
         s,
-        "time     {:.2} s: detect {:.2}, decode {:.2}, samples {:.2}, solve {:.2}{}{}",
+        "time     {:.2} s: detect {:.2}, decode {:.2}, samples {:.2}, solve {:.2}{}{}{}",
         t.total_s,
         t.detect_s,
         t.decode_s,
@@ -1254,6 +1483,11 @@ pub fn summary(f: &FitFile) -> String {
         t.solve_s,
         if t.model_choice_s > 0.0 {
             format!(", model choice {:.2}", t.model_choice_s)
+        } else {
+            String::new()
+        },
+        if t.jackknife_s > 0.0 {
+            format!(", jackknife {:.2}", t.jackknife_s)
         } else {
             String::new()
         },

@@ -3,10 +3,11 @@
 //! from the model's analytic gradient, and standard errors and correlations from σ²(JᵀJ)⁻¹.
 //!
 //! Unbounded parameters u: ln σ0 (×3), ln albedo (×3), ln(η − 1), ln ks, ln α, and the light's
-//! azimuth and elevation as they are, and the model extensions q and b as they are. Parameters
-//! not free are held at their given value; a [`Prior`] adds a residual (p − mean)/std.
+//! azimuth and elevation as they are, the model extensions q and b as they are, the kernel's
+//! weight as logit w = ln(w / (1 − w)) and its width ratio as ln(s − 1). Parameters not free
+//! are held at their given value; a [`Prior`] adds a residual (p − mean)/std.
 
-use crate::model::{Geometry, Model, Params, N_PARAMS};
+use crate::model::{idx, Geometry, Model, Params, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
@@ -26,6 +27,20 @@ pub fn to_unbounded(p: &[f64; N_PARAMS]) -> [f64; N_PARAMS] {
     for (k, v) in u.iter_mut().enumerate().take(9) {
         *v = if k == 6 { (p[k] - 1.0).ln() } else { p[k].ln() };
     }
+    // The kernel: w = 0 (one Gaussian) maps below −MAP_LIMIT and back to exactly 0; a ratio of
+    // 1 or less (unused while w = 0) to the bottom of its range.
+    let w = p[idx::KERNEL_WEIGHT];
+    u[idx::KERNEL_WEIGHT] = if w > 0.0 {
+        (w / (1.0 - w)).ln()
+    } else {
+        -2.0 * MAP_LIMIT
+    };
+    let s = p[idx::KERNEL_RATIO];
+    u[idx::KERNEL_RATIO] = if s > 1.0 {
+        (s - 1.0).ln()
+    } else {
+        -MAP_LIMIT
+    };
     u
 }
 
@@ -40,6 +55,19 @@ pub fn from_unbounded(u: &[f64; N_PARAMS]) -> ([f64; N_PARAMS], [f64; N_PARAMS])
         p[k] = if k == 6 { 1.0 + e } else { e };
         d[k] = if u[k].abs() < MAP_LIMIT { e } else { 0.0 };
     }
+    let uw = u[idx::KERNEL_WEIGHT];
+    if uw <= -MAP_LIMIT {
+        p[idx::KERNEL_WEIGHT] = 0.0;
+        d[idx::KERNEL_WEIGHT] = 0.0;
+    } else {
+        let w = 1.0 / (1.0 + (-uw.min(MAP_LIMIT)).exp());
+        p[idx::KERNEL_WEIGHT] = w;
+        d[idx::KERNEL_WEIGHT] = w * (1.0 - w);
+    }
+    let us = u[idx::KERNEL_RATIO];
+    let e = us.clamp(-MAP_LIMIT, MAP_LIMIT).exp();
+    p[idx::KERNEL_RATIO] = 1.0 + e;
+    d[idx::KERNEL_RATIO] = if us.abs() < MAP_LIMIT { e } else { 0.0 };
     (p, d)
 }
 

@@ -171,6 +171,9 @@ fn params(az: f64, el: f64) -> Params {
             // Non-zero extensions, so their derivatives are checked too.
             sigma_exponent: 0.4,
             albedo_curvature: 0.1,
+            // A two-Gaussian kernel, so its derivatives are checked too.
+            kernel_weight: 0.3,
+            kernel_ratio: 2.5,
         },
         light: LightAngles {
             azimuth: az,
@@ -280,11 +283,15 @@ fn model_pieces_are_what_the_readme_says() {
     let th = n.dot(&l).acos();
     let t = 1.0 - fresnel::reflectance(n.dot(&v), 1.44);
     let out = Model::default().radiance(&p, &g);
-    // With the extensions: σ = (σ0/r)(25/r)^q, albedo · exp(b (25/r − 1)).
+    // With the extensions: σ = (σ0/r)(25/r)^q, albedo · exp(b (25/r − 1)), and the kernel
+    // (1 − w)·f(θ; σ) + w·f(θ; s·σ).
     let (q, b) = (p.material.sigma_exponent, p.material.albedo_curvature);
+    let (w, s) = (p.material.kernel_weight, p.material.kernel_ratio);
+    assert!(w > 0.0 && s > 1.0);
     for c in 0..3 {
         let sigma = p.material.sigma0_mm[c] / 20.0 * (25.0f64 / 20.0).powf(q);
-        let f = workbench::cdrf::value(th, sigma, Convolution::Wrapped);
+        let f = (1.0 - w) * workbench::cdrf::value(th, sigma, Convolution::Wrapped)
+            + w * workbench::cdrf::value(th, s * sigma, Convolution::Wrapped);
         let a = p.material.albedo[c] * (b * (25.0 / 20.0 - 1.0)).exp();
         assert!((out[c] - a * t * f).abs() < 1e-15);
     }
@@ -304,5 +311,5 @@ fn model_pieces_are_what_the_readme_says() {
         radius_mm: 20.0,
     };
     assert_eq!(Model::default().radiance(&p, &g2), [0.0; 3]);
-    assert_eq!(idx::ALBEDO_CURVATURE, N_PARAMS - 1);
+    assert_eq!(idx::KERNEL_RATIO, N_PARAMS - 1);
 }

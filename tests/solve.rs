@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use workbench::joint::{Extensions, Reduction};
+use workbench::joint::{Extensions, LightFit, Reduction};
 use workbench::solve::{self, ExtensionChoice, FitFile, Method, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
@@ -208,7 +208,7 @@ fn paper_baseline_and_holdout() {
     assert!(Vector3::from(p.light_direction).angle(&dl) < 1e-9);
     // The joint fit with the light held: the detector's light, σ0 still within 1%.
     let held = solve_with(dir, "fit-hold.json", |o| {
-        o.hold_light = true;
+        o.light_fit = LightFit::Hold;
         o.baseline = true;
     });
     assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
@@ -323,6 +323,7 @@ fn one_radius_still_fits_with_a_wider_uncertainty() {
         o.extensions = ExtensionChoice::On(Extensions {
             sigma_exponent: true,
             albedo_curvature: false,
+            two_gaussian: false,
         })
     });
     let five = solve_with(default_session(), "fit-five.json", |_| {});
@@ -527,11 +528,11 @@ fn an_unchanged_rerun_reuses_fit_json() {
     assert_eq!(second.sigma0_mm, first.sigma0_mm);
     assert_eq!(second.options, solve::fingerprint(&Options::new(dir)));
     // Other options: solved again.
-    let other = solve_with(dir, "fit-cache.json", |o| o.hold_light = true);
+    let other = solve_with(dir, "fit-cache.json", |o| o.light_fit = LightFit::Hold);
     assert!(!other.skipped.iter().any(|s| s.starts_with("solve:")));
     // --redetect: solved again.
     let again = solve_with(dir, "fit-cache.json", |o| {
-        o.hold_light = true;
+        o.light_fit = LightFit::Hold;
         o.redetect = true;
     });
     assert!(!again.skipped.iter().any(|s| s.starts_with("solve:")));

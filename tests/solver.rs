@@ -14,6 +14,8 @@ fn plain_free() -> [bool; N_PARAMS] {
     free[idx::ETA] = false;
     free[idx::SIGMA_EXPONENT] = false;
     free[idx::ALBEDO_CURVATURE] = false;
+    free[idx::KERNEL_WEIGHT] = false;
+    free[idx::KERNEL_RATIO] = false;
     free
 }
 
@@ -65,7 +67,17 @@ fn observations(p: &Params, radii: &[f64], per_sphere: usize, noise: f64, seed: 
 
 #[test]
 fn mapping_round_trips_and_its_derivative_matches_differences() {
-    let p = truth().to_vec();
+    // One Gaussian (w = 0) stays exactly one: w maps to the bottom of its range and back to 0.
+    let plain = truth().to_vec();
+    assert_eq!(plain[idx::KERNEL_WEIGHT], 0.0);
+    let (back, d) = from_unbounded(&to_unbounded(&plain));
+    assert_eq!(back[idx::KERNEL_WEIGHT], 0.0);
+    assert_eq!(d[idx::KERNEL_WEIGHT], 0.0);
+    // A two-Gaussian kernel, so that every coordinate's mapping is exercised.
+    let mut t = truth();
+    t.material.kernel_weight = 0.3;
+    t.material.kernel_ratio = 2.5;
+    let p = t.to_vec();
     let u = to_unbounded(&p);
     let (back, d) = from_unbounded(&u);
     for k in 0..N_PARAMS {
@@ -184,7 +196,7 @@ fn recovers_known_parameters_from_a_bad_start() {
     assert!(light < 0.1, "{light}");
     assert!((f.params.material.specular.alpha - 0.1).abs() < 0.01);
     assert_eq!(f.std[idx::ETA], 0.0);
-    assert_eq!(f.correlation.nrows(), N_PARAMS - 3);
+    assert_eq!(f.correlation.nrows(), N_PARAMS - 5);
     // The cost history ends at the final cost and never ends above its start.
     assert!(f.history.len() >= f.evaluations.min(2));
     assert!(

@@ -139,6 +139,8 @@ fn png_pixels_match_truth_within_noise() {
             specular: t.specular,
             sigma_exponent: t.sigma_exponent,
             albedo_curvature: t.albedo_curvature,
+            kernel_weight: t.kernel_weight,
+            kernel_ratio: t.kernel_ratio,
         },
         light: LightAngles::from_direction(&l),
     };

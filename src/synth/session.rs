@@ -110,6 +110,8 @@ impl Default for SessionConfig {
                 },
                 sigma_exponent: 0.0,
                 albedo_curvature: 0.0,
+                kernel_weight: 0.0,
+                kernel_ratio: 0.0,
             },
             material_name: "synthetic wax".into(),
             convolution: Convolution::Wrapped,
@@ -142,6 +144,11 @@ pub struct SessionTruth {
     pub sigma_exponent: f64,
     #[serde(default)]
     pub albedo_curvature: f64,
+    /// The kernel's tail weight and width ratio (0: one Gaussian; see `model`).
+    #[serde(default)]
+    pub kernel_weight: f64,
+    #[serde(default)]
+    pub kernel_ratio: f64,
     /// Unit vector toward the light, camera frame (x right, y down, z forward).
     pub light_direction: [f64; 3],
     pub light_azimuth_deg: f64,
@@ -574,6 +581,8 @@ pub fn generate(
         specular: m.specular,
         sigma_exponent: m.sigma_exponent,
         albedo_curvature: m.albedo_curvature,
+        kernel_weight: m.kernel_weight,
+        kernel_ratio: m.kernel_ratio,
         light_direction: [l.x, l.y, l.z],
         light_azimuth_deg: cfg.light.azimuth.to_degrees(),
         light_elevation_deg: cfg.light.elevation.to_degrees(),
