@@ -698,9 +698,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
                     status[idx::KERNEL_WEIGHT] =
                         format!("off: not determined (free fit: ± {:.3})", f.std[k]);
                     status[idx::KERNEL_RATIO] = "off".into();
-                    notes.push(
-                        "the kernel's shape is not determined: one Gaussian".into(),
-                    );
+                    notes.push("the kernel's shape is not determined: one Gaussian".into());
                 }
                 _ => {
                     notes.push(format!(

@@ -43,6 +43,7 @@ pub mod solve;
 pub mod solver;
 pub mod specular;
 pub mod sphere;
+pub mod stats;
 pub mod synth;
 
 pub use error::{Error, Result};

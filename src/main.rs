@@ -608,10 +608,16 @@ struct CheckerArgs {
 
 fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
     if !(0.0..1.0).contains(&a.kernel_weight) {
-        bail!("--kernel-weight must lie in [0, 1), got {}", a.kernel_weight);
+        bail!(
+            "--kernel-weight must lie in [0, 1), got {}",
+            a.kernel_weight
+        );
     }
     if a.kernel_weight > 0.0 && !(a.kernel_ratio > 1.0 && a.kernel_ratio.is_finite()) {
-        bail!("--kernel-ratio must be a number above 1, got {}", a.kernel_ratio);
+        bail!(
+            "--kernel-ratio must be a number above 1, got {}",
+            a.kernel_ratio
+        );
     }
     let cfg = SessionConfig {
         radii_mm: a.radii,

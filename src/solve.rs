@@ -210,8 +210,9 @@ pub struct Jackknife {
 }
 
 /// Leave-one-radius-out refits of a joint fit: the fit is repeated with every radius left out in
-/// turn (warm-started from the full fit, at its reduction level), and the spread of the n refits
-/// gives each parameter's jackknife standard error √((n−1)/n · Σ(θᵢ − θ̄)²). It sees what the
+/// turn (warm-started from the full fit, on 2° cells or its own coarser level), and the spread of
+/// the n refits gives each parameter's jackknife standard error √((n−1)/n · Σ(θᵢ − θ̄)²),
+/// widened by t_{n−1}/2 (its ±2 covers 95.4% with n − 1 degrees of freedom). It sees what the
 /// noise alone does not: a model that fits each radius a little differently. Each left-out
 /// radius is predicted by the fit to the others. `None` with fewer than 3 radii.
 pub fn jackknife(
@@ -231,9 +232,8 @@ pub fn jackknife(
     }
     // The refits compare errors of percents between subsets, not of standard errors: 2° cells
     // (or the full fit's level when coarser).
-    let reduction = Reduction::Factor(
-        ((jf.chosen.width_deg / 0.25).round() as u32).max(JACKKNIFE_CELLS),
-    );
+    let reduction =
+        Reduction::Factor(((jf.chosen.width_deg / 0.25).round() as u32).max(JACKKNIFE_CELLS));
     let runs: Vec<(Params, bool, HoldoutJson)> = radii
         .par_iter()
         .map(|&r| {
@@ -247,20 +247,32 @@ pub fn jackknife(
                 .iter()
                 .map(|s| joint::predict(&f.model, &f.fit.params, s, PREDICT_PIXELS))
                 .collect();
-            (f.fit.params, f.fit.converged, combine_predictions(r, &preds))
+            (
+                f.fit.params,
+                f.fit.converged,
+                combine_predictions(r, &preds),
+            )
         })
         .collect();
     let n = runs.len() as f64;
     let values: Vec<[f64; N_PARAMS]> = runs.iter().map(|r| r.0.to_vec()).collect();
+    // An estimate from n − 1 degrees of freedom: widened so that ±2 of it covers as ±2σ of a
+    // Gaussian does (95.4%), by t_{n−1} / 2 (1.42 for five radii).
+    let widen =
+        crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, runs.len() as u32 - 1) / 2.0;
     let std = std::array::from_fn(|k| {
         if !jf.fit.free[k] {
             return 0.0;
         }
         let mean = values.iter().map(|v| v[k]).sum::<f64>() / n;
-        ((n - 1.0) / n * values.iter().map(|v| (v[k] - mean).powi(2)).sum::<f64>()).sqrt()
+        widen * ((n - 1.0) / n * values.iter().map(|v| (v[k] - mean).powi(2)).sum::<f64>()).sqrt()
     });
     let heldout: Vec<HoldoutJson> = runs.iter().map(|r| r.2.clone()).collect();
-    let w: f64 = heldout.iter().map(|h| h.pixels as f64).sum::<f64>().max(1.0);
+    let w: f64 = heldout
+        .iter()
+        .map(|h| h.pixels as f64)
+        .sum::<f64>()
+        .max(1.0);
     Some(Jackknife {
         std,
         json: JackknifeJson {
@@ -448,7 +460,7 @@ impl BaselineJson {
 }
 
 impl FitFile {
-    /// The fitted parameters (all 13, as in `parameters`).
+    /// The fitted parameters (all of them, as in `parameters`; a missing one reads 0).
     pub fn params(&self) -> Params {
         let mut v = [0.0; N_PARAMS];
         for p in &self.parameters {
@@ -514,8 +526,22 @@ impl FitFile {
                         format!("parameter {name} is not finite"),
                     ))
                 }
+                // Written before the kernel's shape was a parameter: one Gaussian.
+                None if name.starts_with("kernel_") => {}
                 None => return Err(Error::invalid(file, format!("parameter {name} missing"))),
             }
+        }
+        let m = self.params().material;
+        if !(0.0..1.0).contains(&m.kernel_weight)
+            || (m.kernel_weight > 0.0 && !(m.kernel_ratio > 1.0))
+        {
+            return Err(Error::invalid(
+                file,
+                format!(
+                    "kernel_weight {} must lie in [0, 1) and kernel_ratio {} above 1 when it is not 0",
+                    m.kernel_weight, m.kernel_ratio
+                ),
+            ));
         }
         Ok(())
     }
@@ -955,8 +981,10 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
                 j
             } else {
-                l.skipped
-                    .push("jackknife: off (--no-jackknife), the standard errors are the formal ones".into());
+                l.skipped.push(
+                    "jackknife: off (--no-jackknife), the standard errors are the formal ones"
+                        .into(),
+                );
                 None
             };
             // The paper's baseline beside it, for the figures and a comparison.

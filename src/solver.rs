@@ -36,11 +36,7 @@ pub fn to_unbounded(p: &[f64; N_PARAMS]) -> [f64; N_PARAMS] {
         -2.0 * MAP_LIMIT
     };
     let s = p[idx::KERNEL_RATIO];
-    u[idx::KERNEL_RATIO] = if s > 1.0 {
-        (s - 1.0).ln()
-    } else {
-        -MAP_LIMIT
-    };
+    u[idx::KERNEL_RATIO] = if s > 1.0 { (s - 1.0).ln() } else { -MAP_LIMIT };
     u
 }
 

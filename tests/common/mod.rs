@@ -70,11 +70,13 @@ pub fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
     (a - b).abs() <= rel * b.abs() + abs
 }
 
-/// ../shared/data, or None with a printed reason.
+/// ../shared/data, or None with a printed reason; under `CI=true` its absence fails the test.
 pub fn shared_data() -> Option<std::path::PathBuf> {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
     if p.is_dir() {
         Some(p)
+    } else if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("{} is absent, and CI=true needs it", p.display());
     } else {
         eprintln!("skipped: {} is absent", p.display());
         None

@@ -1,0 +1,80 @@
+//! Small statistics the error bars need: Student's t distribution (docs/uncertainty.md).
+
+use std::f64::consts::PI;
+
+/// P(|T| ≤ t) for Student's t with `dof` degrees of freedom (integer, ≥ 1), in closed form
+/// (Abramowitz & Stegun 26.7.3–4): with θ = atan(t/√ν), 2θ/π + (2/π)·sin θ·Σ for odd ν and
+/// sin θ·Σ for even ν, Σ a finite series in cos²θ.
+pub fn t_central(t: f64, dof: u32) -> f64 {
+    let nu = dof.max(1) as f64;
+    let th = (t.abs() / nu.sqrt()).atan();
+    let (s, c2) = (th.sin(), th.cos().powi(2));
+    if dof % 2 == 1 {
+        // θ + sin θ (cos θ + (2/3) cos³θ + … + (2·4···(ν−3))/(1·3···(ν−2)) cos^(ν−2) θ)
+        let mut term = th.cos();
+        let mut sum = if dof > 1 { term } else { 0.0 };
+        let mut k = 3;
+        while k < dof {
+            term *= c2 * (k - 1) as f64 / k as f64;
+            sum += term;
+            k += 2;
+        }
+        2.0 / PI * (th + s * sum)
+    } else {
+        // sin θ (1 + (1/2) cos²θ + (1·3)/(2·4) cos⁴θ + … )
+        let mut term = 1.0;
+        let mut sum = 1.0;
+        let mut k = 2;
+        while k < dof {
+            term *= c2 * (k - 1) as f64 / k as f64;
+            sum += term;
+            k += 2;
+        }
+        s * sum
+    }
+}
+
+/// The t with P(|T| ≤ t) = `p` (0 < p < 1) for `dof` degrees of freedom, by bisection.
+pub fn t_quantile_central(p: f64, dof: u32) -> f64 {
+    let (mut lo, mut hi) = (0.0, 1.0);
+    while t_central(hi, dof) < p && hi < 1e12 {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if t_central(mid, dof) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// P(|Z| ≤ 2) for a standard normal Z: the coverage of ±2 standard errors.
+pub const TWO_SIGMA: f64 = 0.954_499_736_103_642;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn t_distribution_against_tabulated_quantiles() {
+        // Two-sided 95% points (tables): ν = 1, 2, 4, 5, 10, 30.
+        for (nu, q) in [
+            (1, 12.7062),
+            (2, 4.3027),
+            (4, 2.7764),
+            (5, 2.5706),
+            (10, 2.2281),
+            (30, 2.0423),
+        ] {
+            let t = t_quantile_central(0.95, nu);
+            assert!((t - q).abs() < 1e-4, "ν {nu}: {t} vs {q}");
+        }
+        // ν = 1 is the Cauchy distribution: P(|T| ≤ 1) = 1/2.
+        assert!((t_central(1.0, 1) - 0.5).abs() < 1e-15);
+        // Large ν: the normal's ±2σ.
+        assert!((t_quantile_central(TWO_SIGMA, 400) - 2.0).abs() < 0.01);
+    }
+}

@@ -1,0 +1,194 @@
+//! Do the stated standard errors cover the real error? Synthetic sessions over many noise seeds
+//! (the truth known exactly) and the physically based jade session (the light and η known).
+
+mod common;
+
+use nalgebra::Vector3;
+use std::path::Path;
+use workbench::solve::{self, FitFile, Options};
+use workbench::synth::session::{self, SessionConfig, SessionTruth};
+
+/// One synthetic session (640×480, five radii, 1% noise) for a noise seed. At 320×240 (spheres
+/// 20–45 px in radius) σ0 comes out 2–4% high on every seed, a bias common to all radii that no
+/// jackknife over radii can see (measured 2026-12-01; at 640×480 it is 0.2–0.5%).
+fn session(seed: u64) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let mut camera = session::default_camera();
+    camera.fx = 700.0;
+    camera.fy = 700.0;
+    camera.cx = 321.6;
+    camera.cy = 239.3;
+    camera.image_size = [640, 480];
+    let cfg = SessionConfig {
+        camera,
+        seed,
+        ..SessionConfig::default()
+    };
+    session::generate(&cfg, dir.path(), None, true).unwrap();
+    dir
+}
+
+fn solve(dir: &Path, f: impl FnOnce(&mut Options)) -> FitFile {
+    let mut o = Options::new(dir);
+    f(&mut o);
+    solve::run(&o).unwrap()
+}
+
+fn param<'a>(f: &'a FitFile, name: &str) -> &'a workbench::solve::ParamJson {
+    f.parameters.iter().find(|p| p.name == name).unwrap()
+}
+
+/// Errors in units of the stated std (`std`) and of the formal one (`std_formal`): σ0 and albedo
+/// per channel, α, η and the light's angle (against `light_deg`).
+fn z_scores(f: &FitFile, t: &SessionTruth) -> Vec<(String, f64, f64)> {
+    let mut out = vec![];
+    let truth = [
+        ("sigma0_r", t.sigma0_mm[0]),
+        ("sigma0_g", t.sigma0_mm[1]),
+        ("sigma0_b", t.sigma0_mm[2]),
+        ("albedo_r", t.albedo[0]),
+        ("albedo_g", t.albedo[1]),
+        ("albedo_b", t.albedo[2]),
+        ("alpha", t.specular.alpha),
+        ("eta", t.eta),
+    ];
+    for (name, v) in truth {
+        let p = param(f, name);
+        let formal = p
+            .std_formal
+            .expect("jackknife on: the formal std is stated beside it");
+        out.push((
+            name.to_string(),
+            (p.value - v) / p.std,
+            (p.value - v) / formal,
+        ));
+    }
+    let err = Vector3::from(f.light_direction).angle(&Vector3::from(t.light_direction));
+    let (a, e) = (param(f, "light_azimuth"), param(f, "light_elevation"));
+    let formal = (a.std_formal.unwrap().powi(2) * e.value.cos().powi(2)
+        + e.std_formal.unwrap().powi(2))
+    .sqrt();
+    out.push((
+        "light".into(),
+        err / f.std.light_deg.to_radians(),
+        err / formal,
+    ));
+    out
+}
+
+/// Over 20 seeds the truth lies within ±2 stated standard errors for most of the parameters (a
+/// Gaussian gives 95.4%); the formal errors alone are printed beside for comparison. Measured
+/// 2026-12-01: stated 89.4%, formal alone 27.2% of 180 values (σ0, albedo, α, η, light). The goal
+/// is 90–99% (docs/uncertainty.md); the bound asserted is 85%, 2.5 binomial standard errors below
+/// what was measured, so that a change that loses coverage fails here.
+#[test]
+fn stated_errors_cover_the_truth_over_seeds() {
+    let mut all = vec![];
+    for seed in 1..=20u64 {
+        let dir = session(seed);
+        let t: SessionTruth =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
+                .unwrap();
+        let f = solve(dir.path(), |_| {});
+        assert_eq!(f.std_source, "larger of formal and jackknife");
+        assert!(f.jackknife.as_ref().is_some_and(|j| j.radii.len() == 5));
+        all.extend(z_scores(&f, &t));
+    }
+    let n = all.len() as f64;
+    let within = |k: usize| {
+        all.iter()
+            .filter(|z| if k == 0 { z.1.abs() } else { z.2.abs() } <= 2.0)
+            .count() as f64
+            / n
+    };
+    let (stated, formal) = (within(0), within(1));
+    for name in [
+        "sigma0_r", "sigma0_g", "sigma0_b", "albedo_g", "alpha", "eta", "light",
+    ] {
+        let zs: Vec<String> = all
+            .iter()
+            .filter(|z| z.0 == name)
+            .map(|z| format!("{:+.1}/{:+.1}", z.1, z.2))
+            .collect();
+        println!("{name:9} stated/formal z: {}", zs.join(" "));
+    }
+    println!(
+        "within ±2 std: stated {:.1}%, formal alone {:.1}% ({} parameter values)",
+        100.0 * stated,
+        100.0 * formal,
+        all.len()
+    );
+    assert!((0.85..=0.99).contains(&stated), "stated coverage {stated}");
+    assert!(
+        formal < 0.5,
+        "the formal errors alone cover {formal}: the jackknife adds nothing?"
+    );
+}
+
+/// The physically based jade session (../shared/data/pbr-jade): the CDRF does not describe it
+/// exactly, so an error its stated std does not cover must be flagged in the notes. Measured
+/// (2026-12-01, defaults): light 2.98° off against a stated ± 0.19° (the shading pulls it 9 of
+/// the detector's ± 0.33° from the highlights' estimate, which is 0.08° off), residuals 4.7× the
+/// noise; held-out radii 5.0–5.8% relative RMSE.
+#[test]
+fn jade_errors_are_covered_or_flagged() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    let src = data.join("pbr-jade");
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(&src).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+    }
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
+    let l: Vec<f64> = truth["light"]["direction_to_light_camera_frame"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let l = Vector3::new(l[0], l[1], l[2]);
+    let f = solve(dir.path(), |_| {});
+    let err = Vector3::from(f.light_direction).angle(&l).to_degrees();
+    let pull = f
+        .light_pull
+        .expect("the detector's light and its error are known");
+    let d: workbench::detect::Detections =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detections.json")).unwrap())
+            .unwrap();
+    let det_err = Vector3::from(d.light_direction.unwrap())
+        .angle(&l)
+        .to_degrees();
+    let j = f.jackknife.as_ref().unwrap();
+    println!(
+        "jade: light {err:.3}° off (stated ± {:.3}°; detector {det_err:.3}° off, ± {:.3}°; pull {:.1}); σ0 {:.3?} ± {:.3?}; held out {:?}",
+        f.std.light_deg,
+        pull.detector_std_deg,
+        pull.pull,
+        f.sigma0_mm,
+        f.std.sigma0_mm,
+        j.heldout
+            .iter()
+            .map(|h| (h.radius_mm, (1000.0 * h.rel_rmse).round() / 10.0))
+            .collect::<Vec<_>>()
+    );
+    for n in &f.notes {
+        println!("note {n}");
+    }
+    // The detector's light is within 3 of its own standard errors.
+    assert!(det_err < 3.0 * pull.detector_std_deg, "detector {det_err}°");
+    // The fit's light: covered by its stated std, or the pull and the misfit are flagged.
+    let flagged = |what: &str| f.notes.iter().any(|n| n.contains(what));
+    if err > 3.0 * f.std.light_deg {
+        assert!(pull.pull > workbench::joint::PULL_WARN);
+        assert!(flagged("pulls the light"), "{:?}", f.notes);
+        assert!(flagged("the model does not describe these photos"));
+    }
+    // Every radius predicted from the others within 6.5% (measured 5.0–5.8%).
+    assert_eq!(j.radii.len(), 5);
+    for h in &j.heldout {
+        assert!(h.rel_rmse < 0.065, "{h:?}");
+    }
+}
