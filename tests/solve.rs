@@ -1,6 +1,8 @@
 //! `workbench solve` against ground truth: synthetic sessions rendered by the project's forward
 //! model with known material and light (truth.json), through detection, sampling and the fit.
 
+mod common;
+
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -10,13 +12,10 @@ use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// A 640×480 camera: a quarter of the default's pixels, so that the tests stay fast.
 fn small(cfg: SessionConfig) -> SessionConfig {
-    let mut cam = session::default_camera();
-    cam.fx = 700.0;
-    cam.fy = 700.0;
-    cam.cx = 321.6;
-    cam.cy = 239.3;
-    cam.image_size = [640, 480];
-    SessionConfig { camera: cam, ..cfg }
+    SessionConfig {
+        camera: common::camera_640x480(),
+        ..cfg
+    }
 }
 
 fn make(cfg: SessionConfig) -> tempfile::TempDir {

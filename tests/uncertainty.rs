@@ -13,14 +13,8 @@ use workbench::synth::session::{self, SessionConfig, SessionTruth};
 /// jackknife over radii can see (measured 2026-12-01; at 640×480 it is 0.2–0.5%).
 fn session(seed: u64) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    let mut camera = session::default_camera();
-    camera.fx = 700.0;
-    camera.fy = 700.0;
-    camera.cx = 321.6;
-    camera.cy = 239.3;
-    camera.image_size = [640, 480];
     let cfg = SessionConfig {
-        camera,
+        camera: common::camera_640x480(),
         seed,
         ..SessionConfig::default()
     };

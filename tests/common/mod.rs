@@ -122,6 +122,17 @@ pub fn diligent_session(
     (names, truth)
 }
 
+/// A 640×480 version of the synthetic camera (fx 700): a quarter of the default's pixels.
+pub fn camera_640x480() -> workbench::camera::Camera {
+    let mut cam = workbench::synth::session::default_camera();
+    cam.fx = 700.0;
+    cam.fy = 700.0;
+    cam.cx = 321.6;
+    cam.cy = 239.3;
+    cam.image_size = [640, 480];
+    cam
+}
+
 /// A 320×240 version of the synthetic camera (fx 350): small sessions for fast tests.
 pub fn camera_320x240() -> workbench::camera::Camera {
     let mut cam = workbench::synth::session::default_camera();
