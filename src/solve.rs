@@ -1151,23 +1151,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         })
         .collect();
     let holdout = opts.holdout.map(|r| {
-        let held: Vec<&SphereRmse> = spheres.iter().filter(|s| s.held_out).collect();
-        let comb = |f: fn(&SphereRmse) -> f64| {
-            let n: f64 = held.iter().map(|s| s.pixels as f64).sum();
-            (held
-                .iter()
-                .map(|s| f(s).powi(2) * s.pixels as f64)
-                .sum::<f64>()
-                / n.max(1.0))
-            .sqrt()
-        };
-        HoldoutJson {
-            radius_mm: r,
-            pixels: held.iter().map(|s| s.pixels).sum(),
-            rel_rmse: comb(|s| s.rel_rmse),
-            lit_rel_rmse: comb(|s| s.lit_rel_rmse),
-            unlit_rel_rmse: comb(|s| s.unlit_rel_rmse),
-        }
+        let held: Vec<Prediction> = spheres
+            .iter()
+            .filter(|s| s.held_out)
+            .map(|s| Prediction {
+                pixels: s.pixels,
+                rmse: s.rmse,
+                rel_rmse: s.rel_rmse,
+                lit_rel_rmse: s.lit_rel_rmse,
+                unlit_rel_rmse: s.unlit_rel_rmse,
+            })
+            .collect();
+        combine_predictions(r, &held)
     });
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     pb.inc(1);

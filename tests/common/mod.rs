@@ -122,26 +122,26 @@ pub fn diligent_session(
     (names, truth)
 }
 
+/// The synthetic camera (its distortion) at another size, focal length and principal point.
+fn camera(size: [u32; 2], f: f64, cx: f64, cy: f64) -> workbench::camera::Camera {
+    workbench::camera::Camera {
+        fx: f,
+        fy: f,
+        cx,
+        cy,
+        image_size: size,
+        ..workbench::synth::session::default_camera()
+    }
+}
+
 /// A 640×480 version of the synthetic camera (fx 700): a quarter of the default's pixels.
 pub fn camera_640x480() -> workbench::camera::Camera {
-    let mut cam = workbench::synth::session::default_camera();
-    cam.fx = 700.0;
-    cam.fy = 700.0;
-    cam.cx = 321.6;
-    cam.cy = 239.3;
-    cam.image_size = [640, 480];
-    cam
+    camera([640, 480], 700.0, 321.6, 239.3)
 }
 
 /// A 320×240 version of the synthetic camera (fx 350): small sessions for fast tests.
 pub fn camera_320x240() -> workbench::camera::Camera {
-    let mut cam = workbench::synth::session::default_camera();
-    cam.fx = 350.0;
-    cam.fy = 350.0;
-    cam.cx = 160.8;
-    cam.cy = 119.6;
-    cam.image_size = [320, 240];
-    cam
+    camera([320, 240], 350.0, 160.8, 119.6)
 }
 
 /// Run the workbench binary: (exit code, stdout, stderr).
