@@ -215,6 +215,232 @@ pub fn value(theta: f64, sigma: f64, conv: Convolution) -> f64 {
     eval(theta, sigma, conv).value
 }
 
+/// A source profile other than the clamped cosine: g(θ) = Σₖ aₖ cos kθ on |θ| < π/2 and 0
+/// outside, with the derivatives of its coefficients with respect to one parameter p (for the
+/// entry-side transmission of [`crate::entry`], p = η). The blur of each windowed cosine has the
+/// same closed form as the clamped cosine's (docs/model.md §"Entry transmission"), so
+/// G_σ * g = Σₖ aₖ Bₖ(θ; σ) and ∂/∂p = Σₖ ∂aₖ/∂p Bₖ.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Series {
+    /// aₖ, k = 0 ..= K.
+    pub coeffs: Vec<f64>,
+    /// ∂aₖ/∂p.
+    pub d_coeffs: Vec<f64>,
+    /// Fourier coefficients cₙ of the 2π-periodic g (the wrapped form for wide blurs) and ∂cₙ/∂p.
+    fourier: Vec<f64>,
+    d_fourier: Vec<f64>,
+}
+
+/// Harmonics of the periodic g kept for the wrapped form's Fourier branch (σ ≥ 0.85: the factor
+/// exp(−n²σ²/2) is below 1e-18 from n = 11 on).
+const N_FOURIER: usize = 12;
+
+impl Series {
+    /// The series with coefficients `coeffs` and their derivatives `d_coeffs`.
+    pub fn new(coeffs: Vec<f64>, d_coeffs: Vec<f64>) -> Series {
+        assert_eq!(coeffs.len(), d_coeffs.len());
+        // S(m) = ∫_{−π/2}^{π/2} cos mθ dθ.
+        let s = |m: i64| {
+            if m == 0 {
+                PI
+            } else {
+                2.0 * (m as f64 * FRAC_PI_2).sin() / m as f64
+            }
+        };
+        // cₙ = (1/π) ∫ g cos nθ (n ≥ 1), c₀ = (1/2π) ∫ g, with
+        // ∫ cos kθ cos nθ over the window = ½ (S(k − n) + S(k + n)).
+        let project = |a: &[f64]| -> Vec<f64> {
+            (0..N_FOURIER as i64)
+                .map(|n| {
+                    let sum: f64 = a
+                        .iter()
+                        .enumerate()
+                        .map(|(k, &ak)| ak * 0.5 * (s(k as i64 - n) + s(k as i64 + n)))
+                        .sum();
+                    if n == 0 {
+                        sum / (2.0 * PI)
+                    } else {
+                        sum / PI
+                    }
+                })
+                .collect()
+        };
+        Series {
+            fourier: project(&coeffs),
+            d_fourier: project(&d_coeffs),
+            coeffs,
+            d_coeffs,
+        }
+    }
+
+    /// The clamped cosine itself (a₁ = 1): a check of the general path against [`eval`].
+    pub fn clamped_cosine() -> Series {
+        Series::new(vec![0.0, 1.0], vec![0.0, 0.0])
+    }
+
+    /// g(θ) unblurred.
+    pub fn source(&self, theta: f64) -> f64 {
+        if theta.cos() <= 0.0 {
+            return 0.0;
+        }
+        self.coeffs
+            .iter()
+            .enumerate()
+            .map(|(k, a)| a * (k as f64 * theta).cos())
+            .sum()
+    }
+}
+
+/// The blurred series and its derivative with respect to the series' parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeriesEval {
+    pub f: CdrfEval,
+    /// ∂f/∂p.
+    pub d_param: f64,
+}
+
+impl std::ops::AddAssign for SeriesEval {
+    fn add_assign(&mut self, e: SeriesEval) {
+        self.f.value += e.f.value;
+        self.f.d_theta += e.f.d_theta;
+        self.f.d2_theta += e.f.d2_theta;
+        self.f.d_sigma += e.f.d_sigma;
+        self.d_param += e.d_param;
+    }
+}
+
+/// Line form of the series at θ ≥ 0. For each k, Zₖ = ∫_{−π/2}^{π/2} e^{ikθ'} G_σ(θ − θ') dθ'
+/// is z_line's expression with y = kσ/√2, the lead e^{ikθ − k²σ²/2} and the phases i^k, (−i)^k
+/// (docs/model.md); Bₖ = Re Zₖ, and from the integral
+/// ∂Zₖ/∂θ = ik Zₖ − i^k G(θ − π/2) + (−i)^k G(θ + π/2).
+fn series_line_pos(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
+    let i = Complex64::new(0.0, 1.0);
+    let x1 = (FRAC_PI_2 - theta) / (sigma * SQRT_2);
+    let x2 = (FRAC_PI_2 + theta) / (sigma * SQRT_2);
+    const SKIP: f64 = 40.0;
+    let term = |x: f64, re: f64| {
+        if x * x > SKIP {
+            Complex64::new(0.0, 0.0)
+        } else {
+            (-x * x).exp() * Complex64::new(re, x.abs()).w()
+        }
+    };
+    let u1 = theta - FRAC_PI_2;
+    let u2 = theta + FRAC_PI_2;
+    let (g1, g2) = (gauss(u1, sigma), gauss(u2, sigma));
+    let (dg1, dg2) = (-u1 / (sigma * sigma) * g1, -u2 / (sigma * sigma) * g2);
+    let e1 = Complex64::from_polar(1.0, theta);
+    let mut rot = Complex64::new(1.0, 0.0); // e^{ikθ}
+    let mut ik = Complex64::new(1.0, 0.0); // i^k
+    let mut out = SeriesEval {
+        f: CdrfEval {
+            value: 0.0,
+            d_theta: 0.0,
+            d2_theta: 0.0,
+            d_sigma: 0.0,
+        },
+        d_param: 0.0,
+    };
+    for (k, (&a, &da)) in s.coeffs.iter().zip(&s.d_coeffs).enumerate() {
+        if a != 0.0 || da != 0.0 {
+            let kf = k as f64;
+            let y = kf * sigma / SQRT_2;
+            let mik = ik.conj(); // (−i)^k
+            let t2 = term(x2, -y);
+            let z = if x1 >= 0.0 {
+                rot * (-y * y).exp() - 0.5 * (ik * term(x1, y) + mik * t2)
+            } else {
+                0.5 * (ik * term(x1, -y) - mik * t2)
+            };
+            let dz = i * kf * z - ik * g1 + mik * g2;
+            let d2z = i * kf * dz - ik * dg1 + mik * dg2;
+            out.f.value += a * z.re;
+            out.f.d_theta += a * dz.re;
+            out.f.d2_theta += a * d2z.re;
+            out.d_param += da * z.re;
+        }
+        rot *= e1;
+        ik *= i;
+    }
+    out.f.d_sigma = sigma * out.f.d2_theta;
+    out
+}
+
+fn series_line(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
+    if sigma < SIGMA_ZERO {
+        // The unblurred source with its one-sided derivatives.
+        let inside = theta.cos() > 0.0;
+        let mut f = CdrfEval {
+            value: 0.0,
+            d_theta: 0.0,
+            d2_theta: 0.0,
+            d_sigma: 0.0,
+        };
+        let mut d_param = 0.0;
+        if inside {
+            for (k, (&a, &da)) in s.coeffs.iter().zip(&s.d_coeffs).enumerate() {
+                let kf = k as f64;
+                let (sn, cn) = (kf * theta).sin_cos();
+                f.value += a * cn;
+                f.d_theta -= a * kf * sn;
+                f.d2_theta -= a * kf * kf * cn;
+                d_param += da * cn;
+            }
+        }
+        return SeriesEval { f, d_param };
+    }
+    let mut e = series_line_pos(theta.abs(), sigma, s);
+    e.f.d_theta *= theta.signum();
+    e
+}
+
+fn series_fourier(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
+    let s2 = sigma * sigma;
+    let mut f = CdrfEval {
+        value: s.fourier[0],
+        d_theta: 0.0,
+        d2_theta: 0.0,
+        d_sigma: 0.0,
+    };
+    let mut d_param = s.d_fourier[0];
+    for n in 1..N_FOURIER {
+        let nf = n as f64;
+        let e = (-0.5 * nf * nf * s2).exp();
+        let (sn, cn) = (nf * theta).sin_cos();
+        let c = s.fourier[n] * e;
+        f.value += c * cn;
+        f.d_theta -= c * nf * sn;
+        f.d2_theta -= c * nf * nf * cn;
+        d_param += s.d_fourier[n] * e * cn;
+    }
+    f.d_sigma = sigma * f.d2_theta;
+    SeriesEval { f, d_param }
+}
+
+/// The blurred series with derivatives, in either convolution (the same branches as [`eval`]).
+pub fn eval_series(theta: f64, sigma: f64, s: &Series, conv: Convolution) -> SeriesEval {
+    let mut e = match conv {
+        Convolution::Line => series_line(theta, sigma, s),
+        Convolution::Wrapped => {
+            let t = reduce(theta);
+            if sigma < 0.17 {
+                series_line(t, sigma, s)
+            } else if sigma < 0.85 {
+                let mut acc = series_line(t, sigma, s);
+                for k in [-1.0, 1.0] {
+                    acc += series_line(t + 2.0 * PI * k, sigma, s);
+                }
+                acc
+            } else {
+                series_fourier(t, sigma, s)
+            }
+        }
+    };
+    // The series approximates a non-negative source to ~1e-5; keep the result non-negative.
+    e.f.value = e.f.value.max(0.0);
+    e
+}
+
 /// The CDRF with a kernel of two Gaussians, (1 − w)·f(θ; σ) + w·f(θ; s·σ): a weight w ∈ [0, 1)
 /// moved to a Gaussian s > 1 times wider (docs/kernel.md). Sums of Gaussians approximate
 /// diffusion profiles (a sharp core, a long tail); the blur is linear in its kernel, so the closed
@@ -227,29 +453,48 @@ pub struct MixtureEval {
     pub d_weight: f64,
     /// ∂f/∂s.
     pub d_ratio: f64,
+    /// ∂f/∂p of a [`Series`] source (0 for the clamped cosine).
+    pub d_param: f64,
 }
 
-/// [`MixtureEval`] at (θ, σ) for weight `w` and width ratio `s`.
-pub fn mixture(theta: f64, sigma: f64, w: f64, s: f64, conv: Convolution) -> MixtureEval {
-    let core = eval(theta, sigma, conv);
+/// [`MixtureEval`] at (θ, σ) for weight `w` and width ratio `s`, blurring the clamped cosine
+/// (`source` None) or a [`Series`].
+pub fn mixture(
+    theta: f64,
+    sigma: f64,
+    w: f64,
+    s: f64,
+    source: Option<&Series>,
+    conv: Convolution,
+) -> MixtureEval {
+    let one = |sig: f64| match source {
+        None => SeriesEval {
+            f: eval(theta, sig, conv),
+            d_param: 0.0,
+        },
+        Some(series) => eval_series(theta, sig, series, conv),
+    };
+    let core = one(sigma);
     if w == 0.0 {
         return MixtureEval {
-            f: core,
+            f: core.f,
             d_weight: 0.0,
             d_ratio: 0.0,
+            d_param: core.d_param,
         };
     }
-    let tail = eval(theta, s * sigma, conv);
+    let tail = one(s * sigma);
     let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
     MixtureEval {
         f: CdrfEval {
-            value: mix(core.value, tail.value),
-            d_theta: mix(core.d_theta, tail.d_theta),
-            d2_theta: mix(core.d2_theta, tail.d2_theta),
-            d_sigma: mix(core.d_sigma, s * tail.d_sigma),
+            value: mix(core.f.value, tail.f.value),
+            d_theta: mix(core.f.d_theta, tail.f.d_theta),
+            d2_theta: mix(core.f.d2_theta, tail.f.d2_theta),
+            d_sigma: mix(core.f.d_sigma, s * tail.f.d_sigma),
         },
-        d_weight: tail.value - core.value,
-        d_ratio: w * sigma * tail.d_sigma,
+        d_weight: tail.f.value - core.f.value,
+        d_ratio: w * sigma * tail.f.d_sigma,
+        d_param: mix(core.d_param, tail.d_param),
     }
 }
 
@@ -265,6 +510,80 @@ mod tests {
             assert!((value(t, 1e-7, Convolution::Line) - c).abs() < 1e-6);
             assert!((value(t, 60.0, Convolution::Wrapped) - FRAC_1_PI).abs() < 1e-12);
             assert!(value(t, 1e9, Convolution::Line) < 1e-9);
+        }
+    }
+
+    /// The general series path with a₁ = 1 is the clamped cosine's closed form, on every branch.
+    #[test]
+    fn series_of_the_clamped_cosine_is_the_cdrf() {
+        let s = Series::clamped_cosine();
+        for conv in [Convolution::Wrapped, Convolution::Line] {
+            for sigma in [1e-250, 0.01, 0.1, 0.3, 0.8, 1.5, 4.0] {
+                for i in 0..=60 {
+                    let t = -PI + 2.0 * PI * i as f64 / 60.0 + 1e-3;
+                    let a = eval(t, sigma, conv);
+                    let b = eval_series(t, sigma, &s, conv).f;
+                    let ok = |x: f64, y: f64| (x - y).abs() < 1e-12 * (1.0 + x.abs());
+                    assert!(
+                        ok(a.value, b.value)
+                            && ok(a.d_theta, b.d_theta)
+                            && ok(a.d2_theta, b.d2_theta)
+                            && ok(a.d_sigma, b.d_sigma),
+                        "{conv:?} σ {sigma} θ {t}: {a:?} {b:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Every derivative of a blurred series with several harmonics against central differences.
+    #[test]
+    fn series_derivatives_match_finite_differences() {
+        let a = vec![0.1, 0.7, -0.2, 0.05, 0.3, -0.04];
+        let da = vec![0.3, -0.1, 0.2, 0.4, -0.5, 0.1];
+        let at = |p: f64| {
+            Series::new(
+                a.iter().zip(&da).map(|(x, d)| x + p * d).collect(),
+                da.clone(),
+            )
+        };
+        let s = at(0.0);
+        for conv in [Convolution::Wrapped, Convolution::Line] {
+            for sigma in [0.05, 0.3, 1.2] {
+                for i in 0..24 {
+                    let t = 0.05 + 3.0 * i as f64 / 24.0;
+                    let e = eval_series(t, sigma, &s, conv);
+                    let h = 1e-5;
+                    let v = |t: f64, sg: f64, p: f64| eval_series(t, sg, &at(p), conv).f.value;
+                    let dt = (v(t + h, sigma, 0.0) - v(t - h, sigma, 0.0)) / (2.0 * h);
+                    let ds = (v(t, sigma + h, 0.0) - v(t, sigma - h, 0.0)) / (2.0 * h);
+                    let dp = (v(t, sigma, h) - v(t, sigma, -h)) / (2.0 * h);
+                    let d2 = (eval_series(t + h, sigma, &s, conv).f.d_theta
+                        - eval_series(t - h, sigma, &s, conv).f.d_theta)
+                        / (2.0 * h);
+                    let ok = |x: f64, y: f64| (x - y).abs() < 1e-6 * (1.0 + x.abs());
+                    assert!(
+                        ok(e.f.d_theta, dt),
+                        "{conv:?} σ {sigma} θ {t}: ∂θ {} {dt}",
+                        e.f.d_theta
+                    );
+                    assert!(
+                        ok(e.f.d_sigma, ds),
+                        "{conv:?} σ {sigma} θ {t}: ∂σ {} {ds}",
+                        e.f.d_sigma
+                    );
+                    assert!(
+                        ok(e.d_param, dp),
+                        "{conv:?} σ {sigma} θ {t}: ∂p {} {dp}",
+                        e.d_param
+                    );
+                    assert!(
+                        ok(e.f.d2_theta, d2),
+                        "{conv:?} σ {sigma} θ {t}: ∂²θ {} {d2}",
+                        e.f.d2_theta
+                    );
+                }
+            }
         }
     }
 

@@ -52,8 +52,13 @@ struct Evaluated<'a> {
     px: Vec<[u32; 2]>,
 }
 
-fn evaluate<'a>(s: &'a SphereData, p: &Params, baseline: Option<&Params>) -> Evaluated<'a> {
-    let model = Model::default();
+fn evaluate<'a>(
+    s: &'a SphereData,
+    model: &Model,
+    p: &Params,
+    baseline: Option<&Params>,
+) -> Evaluated<'a> {
+    let paper = crate::paper::predicting_model();
     let l = p.light.direction();
     let stride = (s.obs.len() / PIXELS).max(1);
     let idx: Vec<usize> = (0..s.obs.len()).step_by(stride).collect();
@@ -68,7 +73,7 @@ fn evaluate<'a>(s: &'a SphereData, p: &Params, baseline: Option<&Params>) -> Eva
                 angle(g.normal.dot(&g.view)),
                 o.radiance,
                 model.radiance(p, g),
-                baseline.map(|b| model.radiance(b, g)),
+                baseline.map(|b| paper.radiance(b, g)),
                 s.px[k],
             )
         })
@@ -632,6 +637,7 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
     let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
     radii.sort_by(|a, b| b.total_cmp(a));
     radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let model = fit.model();
     let groups: Vec<Group> = radii
         .iter()
         .enumerate()
@@ -641,7 +647,7 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
             let spheres: Vec<Evaluated> = spheres
                 .iter()
                 .filter(|s| (s.radius_mm - r).abs() < 1e-9)
-                .map(|s| evaluate(s, &p, b.as_ref()))
+                .map(|s| evaluate(s, &model, &p, b.as_ref()))
                 .collect();
             let peak = std::array::from_fn(|c| {
                 let v = percentile(

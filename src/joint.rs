@@ -18,7 +18,6 @@
 //!    plausible range are held at their prior (η, α), or switched off (ks, the extensions), and
 //!    the fit is repeated.
 
-use crate::cdrf;
 use crate::fresnel;
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use crate::observe::SphereData;
@@ -226,6 +225,32 @@ pub struct JointFit {
     /// How far the fit moved the detector's light (when the light was free and a detector's
     /// light with its error was given).
     pub light_pull: Option<LightPull>,
+    /// Per parameter, the scale factor its stated error takes for the disagreement between its
+    /// prior and the data ([`prior_tension`]; 1 without a prior or without disagreement).
+    pub prior_tension: [f64; N_PARAMS],
+    /// The disagreement between η from the whole fit and from the highlight alone when it is
+    /// beyond their errors (0 otherwise; only with the irradiance given).
+    pub eta_systematic: f64,
+}
+
+/// The Particle Data Group's scale factor for a parameter with a prior: the prior (m_p ± σ_p)
+/// and the data alone (m_d ± σ_d, recovered from the posterior m ± σ through
+/// 1/σ² = 1/σ_p² + 1/σ_d² and m/σ² = m_p/σ_p² + m_d/σ_d²) are two measurements of one quantity;
+/// when they disagree by more than their errors allow, S = |m_d − m_p| / √(σ_p² + σ_d²) > 1
+/// and the stated error is scaled by S (docs/uncertainty.md). 1 where the data add nothing.
+pub fn prior_tension(value: f64, std: f64, prior: &Prior) -> f64 {
+    let inv_data = 1.0 / (std * std) - 1.0 / (prior.std * prior.std);
+    if !(inv_data > 0.0) || !inv_data.is_finite() {
+        return 1.0;
+    }
+    let var_data = 1.0 / inv_data;
+    let m_data = var_data * (value / (std * std) - prior.mean / (prior.std * prior.std));
+    let s = (m_data - prior.mean).abs() / (prior.std * prior.std + var_data).sqrt();
+    if s.is_finite() {
+        s.max(1.0)
+    } else {
+        1.0
+    }
 }
 
 /// The light from the shading alone (a start value when no highlight was found). Where the
@@ -294,13 +319,15 @@ pub fn diffuse_start(
             (g.normal.dot(&l).clamp(-1.0, 1.0).acos(), t, g.radius_mm)
         })
         .collect();
+    // The profile of one Gaussian (of the transmitted irradiance when the model has it) at η.
+    let plain = Params::diffuse([1.0; 3], [1.0; 3], eta, *light).material;
     let mut s0 = [0.0; 3];
     let mut a0 = [0.0; 3];
     for c in 0..3 {
         let eval = |sig0: f64| -> (f64, f64) {
             let (mut sff, mut sfl, mut sll) = (0.0, 0.0, 0.0);
             for (o, &(th, t, r)) in obs.iter().zip(&geo) {
-                let f = t * cdrf::value(th, sig0 / r, model.convolution);
+                let f = t * model.profile(&plain, th, sig0 / r).f.value;
                 let w2 = o.weight[c] * o.weight[c];
                 sff += w2 * f * f;
                 sfl += w2 * f * o.radiance[c];
@@ -846,13 +873,13 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
     if status[idx::ETA].starts_with("prior") && tension > 3.0 {
         notes.push(format!(
-            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim disagrees with the data; measure η with --irradiance",
+            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim and the terminator disagrees with the data (its std is scaled for the disagreement); measure η with --irradiance",
             fit.params.material.eta
         ));
     }
     if status[idx::ETA].starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
         notes.push(format!(
-            "η = {:.4} ± {:.4}: the data, through the exit transmission T(φ), determine η better than its prior (± {eta_std}); that rests on the model's silhouette fall-off",
+            "η = {:.4} (formal ± {:.4}): the data, through the Fresnel transmissions, determine η better than its prior (± {eta_std}); that rests on the model's fall-off at the terminator and the rim",
             fit.params.material.eta, fit.std[idx::ETA]
         ));
     }
@@ -889,6 +916,31 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             status[k] = "fixed".into();
         }
     }
+    let mut tension = [1.0; N_PARAMS];
+    for q in priors.iter().filter(|q| fit.free[q.index]) {
+        tension[q.index] = prior_tension(fit.params.to_vec()[q.index], fit.std[q.index], q);
+    }
+    // With the irradiance given, η is measured by the highlight's height — and, through the
+    // transmissions, by the diffuse shading, the least exact part of the model. Refit η (and α)
+    // on the highlight's pixels alone, the rest held: a disagreement beyond the two formal errors
+    // is flagged and joins η's error as a systematic (docs/uncertainty.md, "η").
+    let mut eta_systematic = 0.0;
+    if setup.irradiance.is_some() && specular && fit.free[idx::ETA] && pooled.kept.len() > 8 {
+        let mut hl_free = [false; N_PARAMS];
+        hl_free[idx::ETA] = true;
+        hl_free[idx::ALPHA] = fit.free[idx::ALPHA];
+        let hl = solver::fit(model, &pooled.kept, &fit.params, hl_free, &[]);
+        let (a, b) = (hl.params.material.eta, fit.params.material.eta);
+        let combined = (hl.std[idx::ETA].powi(2) + fit.std[idx::ETA].powi(2)).sqrt();
+        if hl.converged && combined > 0.0 && (a - b).abs() > 3.0 * combined {
+            eta_systematic = (a - b).abs();
+            notes.push(format!(
+                "η = {b:.4} from the joint fit, {a:.4} ± {:.4} from the highlight alone ({:.1} of their errors apart): the diffuse shading pulls η through the transmissions; the difference joins η's std",
+                hl.std[idx::ETA],
+                (a - b).abs() / combined
+            ));
+        }
+    }
     lap("joint stage", &mut phases);
     // Each note once (the identifiability rounds repeat theirs).
     let mut seen = std::collections::HashSet::new();
@@ -906,6 +958,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         status,
         specular,
         light_pull,
+        prior_tension: tension,
+        eta_systematic,
     }
 }
 
@@ -1073,5 +1127,31 @@ pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> 
         rel_rmse: rel(a[4], a[5]),
         lit_rel_rmse: rel(a[0], a[1]),
         unlit_rel_rmse: rel(a[2], a[3]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prior_tension_is_the_pdg_scale_factor() {
+        let prior = Prior {
+            index: idx::ETA,
+            mean: 0.0,
+            std: 1.0,
+        };
+        // Data 5 ± 1 against the prior 0 ± 1: posterior 2.5 ± 1/√2, and the two measurements
+        // disagree by 5 / √2 of their combined error.
+        let s = prior_tension(2.5, 0.5f64.sqrt(), &prior);
+        assert!((s - 5.0 / 2f64.sqrt()).abs() < 1e-12, "{s}");
+        // Data 1 ± 1: within their errors, no scaling.
+        assert_eq!(prior_tension(0.5, 0.5f64.sqrt(), &prior), 1.0);
+        // Data that add nothing (posterior = prior) or a degenerate std: 1.
+        assert_eq!(prior_tension(0.0, 1.0, &prior), 1.0);
+        assert_eq!(prior_tension(0.3, 0.0, &prior), 1.0);
+        // Very precise data far from the prior: S → |m − m_p| / σ_p.
+        let s = prior_tension(3.0, 1e-4, &prior);
+        assert!((s - 3.0).abs() < 1e-3, "{s}");
     }
 }

@@ -14,6 +14,7 @@ pub mod cdrf;
 #[cfg(feature = "opencv")]
 pub mod cv;
 pub mod detect;
+pub mod entry;
 pub mod error;
 pub mod fitplot;
 pub mod fresnel;

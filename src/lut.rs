@@ -257,10 +257,7 @@ impl FitMaterial {
             return Err(Error::invalid(file, "reference_radius_mm must be > 0"));
         }
         Ok(FitMaterial {
-            model: Model {
-                reference_radius_mm: fit.reference_radius_mm,
-                ..Model::default()
-            },
+            model: fit.model(),
             material: p.material,
             light: p.light,
             measured_kappa: [1.0 / hi, 1.0 / lo],
@@ -379,9 +376,15 @@ pub fn write(
             lut.n_kappa - 1
         ),
         png_scale: scale,
-        content: "diffuse term a_c(kappa) · f(acos(N·L); sigma_c(kappa)) per channel (R, G, B), \
-                  linear radiance, without the exit Fresnel transmission or the specular lobe"
-            .into(),
+        content: format!(
+            "diffuse term a_c(kappa) · f(acos(N·L); sigma_c(kappa)) per channel (R, G, B), \
+             linear radiance, without the exit Fresnel transmission or the specular lobe; f blurs {}",
+            if fm.model.entry_fresnel {
+                "the irradiance transmitted into the medium, max(N·L, 0) · (1 − F(N·L; eta))"
+            } else {
+                "the clamped cosine max(N·L, 0)"
+            }
+        ),
         convolution: fm.model.convolution,
         reference_radius_mm: fm.model.reference_radius_mm,
         material: fm.material,
@@ -444,7 +447,16 @@ mod tests {
                 );
             }
         }
-        // κ = 0 is the clamped cosine times the flat albedo a · exp(−b).
+        // κ = 0 is the unblurred source — the transmitted cosine max(N·L, 0)·T(N·L; η), to the
+        // series' 1.1e-5 (crate::entry) — times the flat albedo a · exp(−b); without the entry
+        // transmission the bare clamped cosine.
+        let entered = Model {
+            entry_fresnel: true,
+            ..model
+        };
+        let d = entered.diffuse(&m, 0.6, 0.0);
+        let t = crate::fresnel::transmission(0.6, m.eta);
+        assert!((d[0] - 0.8 * (-0.1f64).exp() * 0.6 * t).abs() < 3e-5);
         let d = model.diffuse(&m, 0.6, 0.0);
         assert!((d[0] - 0.8 * (-0.1f64).exp() * 0.6).abs() < 1e-12);
         assert_eq!(model.diffuse(&m, -0.3, 0.0), [0.0; 3]);

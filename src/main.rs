@@ -116,6 +116,10 @@ struct SolveArgs {
     /// default uses it as one).
     #[arg(long)]
     free_light: bool,
+    /// Blur the irradiance that enters the medium, max(cos θ, 0)·T(cos θ; η), instead of the
+    /// bare clamped cosine (entry-side Fresnel transmission; about 4× the solve time).
+    #[arg(long)]
+    entry_transmission: bool,
     /// Write figures (PNG and SVG) and index.html into this folder; runs --baseline too.
     #[arg(long)]
     plots: Option<PathBuf>,
@@ -942,6 +946,7 @@ fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
         workbench::joint::LightFit::Prior
     };
     o.jackknife = !a.no_jackknife;
+    o.entry_transmission = a.entry_transmission;
     o.plots = a.plots.clone();
     o.baseline = a.baseline;
     o.quiet = quiet;

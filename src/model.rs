@@ -3,8 +3,11 @@
 //!     L_c = a_c(r) · T(φ; η) · f(θ; σ_c(r))  +  ks · D · G · F(l·h; η) / (4 n·v)
 //!     σ_c(r) = (σ0_c / r) · (r_ref / r)^q,     a_c(r) = a_c · exp(b · (r_ref / r − 1))
 //!
-//! with θ = angle(n, l), φ = angle(n, v), f the CDRF ([`crate::cdrf`]), T = 1 − F the exact
-//! exit-side Fresnel transmission ([`crate::fresnel`]), and the GGX lobe ([`crate::specular`]).
+//! with θ = angle(n, l), φ = angle(n, v), f the CDRF ([`crate::cdrf`]) — the blur along θ of
+//! the clamped cosine, or with `entry_fresnel` of the irradiance transmitted into the medium,
+//! max(cos θ, 0)·T(cos θ; η) ([`crate::entry`]) —,
+//! T = 1 − F the exact Fresnel transmission ([`crate::fresnel`]), and the GGX lobe
+//! ([`crate::specular`]).
 //! The light's irradiance is folded into a_c and ks. The light direction is two angles
 //! ([`LightAngles`]). Parameters are physical here; the solver maps them to unbounded ones.
 //!
@@ -17,6 +20,7 @@
 //! shared by the channels, each channel's width scaled by its σ0 (w = 0: the plain Gaussian).
 
 use crate::cdrf::{self, Convolution};
+use crate::entry;
 use crate::fresnel;
 use crate::specular;
 use nalgebra::Vector3;
@@ -220,6 +224,10 @@ pub struct Model {
     /// Multiply the diffuse term by the exit transmission T(φ) (the paper's baseline divides the
     /// data by it instead and turns this off).
     pub exit_fresnel: bool,
+    /// Blur the transmitted irradiance max(cos θ, 0)·T(cos θ; η) instead of the bare clamped
+    /// cosine ([`crate::entry`]). Off by default (`solve --entry-transmission` turns it on; why
+    /// not yet by default: docs/uncertainty.md).
+    pub entry_fresnel: bool,
 }
 
 /// The reference radius of the extensions: the middle of the usual 15–35 mm sphere sets.
@@ -231,6 +239,7 @@ impl Default for Model {
             convolution: Convolution::default(),
             reference_radius_mm: REFERENCE_RADIUS_MM,
             exit_fresnel: true,
+            entry_fresnel: false,
         }
     }
 }
@@ -261,15 +270,17 @@ impl Model {
         std::array::from_fn(|c| albedo[c] * self.profile(m, theta, sigma[c]).f.value)
     }
 
-    /// The blur profile at θ for a core width σ: the plain CDRF or the two-Gaussian kernel.
+    /// The blur profile at θ for a core width σ: one Gaussian or two, of the clamped cosine or
+    /// of the transmitted irradiance (`entry_fresnel`, its `d_param` then ∂/∂η).
     pub fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
-        cdrf::mixture(
-            theta,
-            sigma,
-            m.kernel_weight,
-            m.kernel_ratio,
-            self.convolution,
-        )
+        let (w, s, conv) = (m.kernel_weight, m.kernel_ratio, self.convolution);
+        if self.entry_fresnel {
+            entry::with_series(m.eta, |series| {
+                cdrf::mixture(theta, sigma, w, s, Some(series), conv)
+            })
+        } else {
+            cdrf::mixture(theta, sigma, w, s, None, conv)
+        }
     }
 
     /// RGB radiance at one surface point.
@@ -326,7 +337,7 @@ impl Model {
             let row = &mut grad[c];
             row[idx::SIGMA0 + c] = a * t_exit * f.d_sigma * sigma / m.sigma0_mm[c];
             row[idx::ALBEDO + c] = albedo_scale * t_exit * f.value;
-            row[idx::ETA] = -a * f.value * fr.d_eta + spec.d_eta;
+            row[idx::ETA] = a * (t_exit * mix.d_param - f.value * fr.d_eta) + spec.d_eta;
             row[idx::KS] = spec.d_ks;
             row[idx::ALPHA] = spec.d_alpha;
             row[idx::SIGMA_EXPONENT] = a * t_exit * f.d_sigma * sigma * ln_rr;

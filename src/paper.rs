@@ -65,11 +65,20 @@ impl PaperFit {
     /// Predict a sphere with its radius's fit (a · T(φ; η) · f(θ; σ)).
     pub fn predict(&self, s: &SphereData, max_pixels: usize) -> Prediction {
         crate::joint::predict(
-            &Model::default(),
+            &predicting_model(),
             &self.params_for(s.radius_mm),
             s,
             max_pixels,
         )
+    }
+}
+
+/// The model that predicts photos from the procedure's parameters: the exit transmission the
+/// procedure divided out multiplied back, and no entry transmission (the paper has none).
+pub fn predicting_model() -> Model {
+    Model {
+        entry_fresnel: false,
+        ..Model::default()
     }
 }
 
@@ -104,6 +113,7 @@ pub fn fit(
     let mask = (2.0 * highlight_radius.unwrap_or(0.0)).max(MASK_DEG.to_radians());
     let model = Model {
         exit_fresnel: false,
+        entry_fresnel: false,
         ..Model::default()
     };
     let angles = LightAngles::from_direction(light);

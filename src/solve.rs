@@ -66,6 +66,9 @@ pub struct Options {
     /// Refit with each radius left out in turn: the jackknife spread of every parameter joins its
     /// standard error, and each left-out radius is predicted (needs 3 or more radii).
     pub jackknife: bool,
+    /// Blur the irradiance transmitted into the medium (entry-side Fresnel) rather than the bare
+    /// clamped cosine (docs/model.md; off by default, docs/uncertainty.md says why).
+    pub entry_transmission: bool,
     pub plots: Option<PathBuf>,
     /// Run the paper's baseline beside a joint fit (also when `plots` is set: its curves are drawn).
     pub baseline: bool,
@@ -89,6 +92,7 @@ impl Options {
             redetect: false,
             light_fit: LightFit::Prior,
             jackknife: true,
+            entry_transmission: false,
             plots: None,
             baseline: false,
             quiet: true,
@@ -138,6 +142,10 @@ pub struct ParamJson {
     /// The leave-one-radius-out jackknife spread (model error across radii included).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub std_jackknife: Option<f64>,
+    /// The factor `std` took because the data and the parameter's prior disagree (PDG scale
+    /// factor, docs/uncertainty.md; absent when 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_tension: Option<f64>,
     /// "fitted", "fixed", "prior …", "off: …".
     pub status: String,
 }
@@ -388,6 +396,10 @@ pub struct FitFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<KernelJson>,
     pub reference_radius_mm: f64,
+    /// The diffuse term blurs the irradiance transmitted into the medium (entry-side Fresnel,
+    /// docs/model.md); false for the paper's procedure and in files written before it.
+    #[serde(default)]
+    pub entry_transmission: bool,
     pub std: StdJson,
     /// What `std` is: "formal" (σ²(JᵀJ)⁻¹) or "larger of formal and jackknife" per parameter.
     #[serde(default)]
@@ -460,6 +472,16 @@ impl BaselineJson {
 }
 
 impl FitFile {
+    /// The model the fit's parameters belong to: its reference radius, and the entry
+    /// transmission unless the file predates it or is the paper's procedure.
+    pub fn model(&self) -> Model {
+        Model {
+            reference_radius_mm: self.reference_radius_mm,
+            entry_fresnel: self.entry_transmission,
+            ..Model::default()
+        }
+    }
+
     /// The fitted parameters (all of them, as in `parameters`; a missing one reads 0).
     pub fn params(&self) -> Params {
         let mut v = [0.0; N_PARAMS];
@@ -725,7 +747,10 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
 
 fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> Setup {
     Setup {
-        model: Model::default(),
+        model: Model {
+            entry_fresnel: opts.entry_transmission,
+            ..Model::default()
+        },
         light: l.light,
         highlight_radius: l.highlight_radius,
         alpha: l.alpha,
@@ -857,7 +882,7 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
 /// The options that decide a fit's result (not where it is written, nor progress display).
 pub fn fingerprint(opts: &Options) -> String {
     format!(
-        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | baseline {}",
+        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | baseline {}",
         env!("CARGO_PKG_VERSION"),
         opts.method,
         opts.holdout,
@@ -870,6 +895,7 @@ pub fn fingerprint(opts: &Options) -> String {
         opts.start_light.map(|l| (l.azimuth, l.elevation)),
         opts.light_fit.name(),
         opts.jackknife,
+        opts.entry_transmission,
         opts.baseline || opts.plots.is_some()
     )
 }
@@ -953,6 +979,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         per_radius: Option<Vec<RadiusFit>>,
         paper: Option<paper::PaperFit>,
         light_pull: Option<LightPull>,
+        /// The model the parameters belong to (what predicts the photos from them).
+        model: Model,
+        prior_tension: [f64; N_PARAMS],
     }
     let outcome = match opts.method {
         Method::Joint => {
@@ -1032,11 +1061,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 }
             }
             Outcome {
+                model: jf.model,
                 params: jf.fit.params,
-                std: match &jack {
-                    Some(j) => std::array::from_fn(|k| jf.fit.std[k].max(j.std[k])),
-                    None => jf.fit.std,
-                },
+                std: std::array::from_fn(|k| {
+                    let spread = jack.as_ref().map_or(0.0, |j| j.std[k]);
+                    let s = jf.fit.std[k].max(spread) * jf.prior_tension[k];
+                    if k == idx::ETA {
+                        s.hypot(jf.eta_systematic)
+                    } else {
+                        s
+                    }
+                }),
+                prior_tension: jf.prior_tension,
                 std_formal: jf.fit.std,
                 jackknife: jack,
                 status: jf.status.clone(),
@@ -1092,6 +1128,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 *f = true;
             }
             Outcome {
+                model: crate::paper::predicting_model(),
+                prior_tension: [1.0; N_PARAMS],
                 params: pf.params,
                 std: pf.std,
                 std_formal: pf.std,
@@ -1123,7 +1161,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     pb.inc(1);
     // Predictions per sphere (the held-out one included).
     let t_hold = Instant::now();
-    let model = Model::default();
+    let model = outcome.model;
     let spheres: Vec<SphereRmse> = l
         .spheres
         .iter()
@@ -1221,6 +1259,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             ratio: m.kernel_ratio,
         }),
         reference_radius_mm: model.reference_radius_mm,
+        entry_transmission: model.entry_fresnel,
         std: StdJson {
             sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
             albedo: [outcome.std[3], outcome.std[4], outcome.std[5]],
@@ -1243,10 +1282,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 ratio: outcome.std[idx::KERNEL_RATIO],
             }),
         },
-        std_source: match &outcome.jackknife {
-            Some(_) => "larger of formal and jackknife".into(),
-            None => "formal".into(),
-        },
+        std_source: format!(
+            "{}{}",
+            match &outcome.jackknife {
+                Some(_) => "larger of formal and jackknife",
+                None => "formal",
+            },
+            if outcome.prior_tension.iter().any(|&s| s > 1.0) {
+                ", times the prior tension where it is given"
+            } else {
+                ""
+            }
+        ),
         jackknife: outcome.jackknife.as_ref().map(|j| j.json.clone()),
         light_fit: match opts.method {
             Method::Joint => opts.light_fit.name().into(),
@@ -1260,6 +1307,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 std: outcome.std[k],
                 std_formal: outcome.jackknife.as_ref().map(|_| outcome.std_formal[k]),
                 std_jackknife: outcome.jackknife.as_ref().map(|j| j.std[k]),
+                prior_tension: (outcome.prior_tension[k] > 1.0).then_some(outcome.prior_tension[k]),
                 status: outcome.status[k].clone(),
             })
             .collect(),

@@ -84,7 +84,11 @@ fn stated_errors_cover_the_truth_over_seeds() {
             serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
                 .unwrap();
         let f = solve(dir.path(), |_| {});
-        assert_eq!(f.std_source, "larger of formal and jackknife");
+        assert!(
+            f.std_source.starts_with("larger of formal and jackknife"),
+            "{}",
+            f.std_source
+        );
         assert!(f.jackknife.as_ref().is_some_and(|j| j.radii.len() == 5));
         all.extend(z_scores(&f, &t));
     }
@@ -121,9 +125,10 @@ fn stated_errors_cover_the_truth_over_seeds() {
 
 /// The physically based jade session (../shared/data/pbr-jade): the CDRF does not describe it
 /// exactly, so an error its stated std does not cover must be flagged in the notes. Measured
-/// (2026-12-01, defaults): light 2.98° off against a stated ± 0.19° (the shading pulls it 9 of
-/// the detector's ± 0.33° from the highlights' estimate, which is 0.08° off), residuals 4.7× the
-/// noise; held-out radii 5.0–5.8% relative RMSE.
+/// (2026-12-01, `--entry-transmission`, otherwise defaults): light 0.34° off against a stated ± 0.12° (2.8
+/// std; the detector's 0.08° off, pull 0.9), η 1.29 ± 0.22 against 1.62 (1.5 std, its std scaled
+/// by the prior tension 3.2), residuals 3.9× the noise; held-out radii 3.7–5.1% relative RMSE.
+/// Without it (the default): light 2.98° off (pull 9.1), held out 5.0–5.8%.
 #[test]
 fn jade_errors_are_covered_or_flagged() {
     let Some(data) = common::shared_data() else {
@@ -144,7 +149,7 @@ fn jade_errors_are_covered_or_flagged() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     let l = Vector3::new(l[0], l[1], l[2]);
-    let f = solve(dir.path(), |_| {});
+    let f = solve(dir.path(), |o| o.entry_transmission = true);
     let err = Vector3::from(f.light_direction).angle(&l).to_degrees();
     let pull = f
         .light_pull
@@ -173,16 +178,32 @@ fn jade_errors_are_covered_or_flagged() {
     }
     // The detector's light is within 3 of its own standard errors.
     assert!(det_err < 3.0 * pull.detector_std_deg, "detector {det_err}°");
-    // The fit's light: covered by its stated std, or the pull and the misfit are flagged.
+    // The fit's light and η within 3 of their stated std (the goal; measured 2.8 and 1.5).
+    assert!(
+        err <= 3.0 * f.std.light_deg,
+        "light {err}° ± {}°",
+        f.std.light_deg
+    );
+    assert!(
+        pull.pull < workbench::joint::PULL_WARN,
+        "pull {}",
+        pull.pull
+    );
+    let eta = param(&f, "eta");
+    assert!(
+        (eta.value - 1.62).abs() <= 3.0 * eta.std,
+        "η {} ± {}",
+        eta.value,
+        eta.std
+    );
+    // η's disagreement with its prior is flagged and widens its std.
     let flagged = |what: &str| f.notes.iter().any(|n| n.contains(what));
-    if err > 3.0 * f.std.light_deg {
-        assert!(pull.pull > workbench::joint::PULL_WARN);
-        assert!(flagged("pulls the light"), "{:?}", f.notes);
-        assert!(flagged("the model does not describe these photos"));
-    }
-    // Every radius predicted from the others within 6.5% (measured 5.0–5.8%).
+    assert!(eta.prior_tension.is_some_and(|s| s > 2.0), "{eta:?}");
+    assert!(flagged("prior σ from the prior"), "{:?}", f.notes);
+    assert!(flagged("the model does not describe these photos"));
+    // Every radius predicted from the others within 5.6% (measured 3.7–5.1%).
     assert_eq!(j.radii.len(), 5);
     for h in &j.heldout {
-        assert!(h.rel_rmse < 0.065, "{h:?}");
+        assert!(h.rel_rmse < 0.056, "{h:?}");
     }
 }
