@@ -88,6 +88,19 @@ fn clamped_cosine(theta: f64) -> CdrfEval {
     }
 }
 
+/// exp(−x²)·w(re + i|x|), the building block of every closed form here. |w| ≤ 1 on the closed
+/// upper half plane, so a term whose factor exp(−x²) is below exp(−40) = 4e-18 cannot change the
+/// result: its Faddeeva evaluation is skipped. For sharp blurs (the usual case) this leaves one
+/// w(z) call, or none, per evaluation.
+fn term(x: f64, re: f64) -> Complex64 {
+    const SKIP: f64 = 40.0;
+    if x * x > SKIP {
+        Complex64::new(0.0, 0.0)
+    } else {
+        (-x * x).exp() * Complex64::new(re, x.abs()).w()
+    }
+}
+
 /// Z(θ, σ) = ½ exp(iθ − σ²/2) [erf((π/2 − θ − iσ²)/(σ√2)) − erf((−π/2 − θ − iσ²)/(σ√2))],
 /// evaluated for θ ≥ 0 without cancellation or overflow: every erf is rewritten as
 /// erfc(x ± iy) = exp(−(x ± iy)²) w(…), and the exp(∓σ²/2) factors cancel analytically, leaving
@@ -98,17 +111,6 @@ fn z_line(theta: f64, sigma: f64) -> Complex64 {
     let x1 = (FRAC_PI_2 - theta) / (sigma * SQRT_2);
     let x2 = (FRAC_PI_2 + theta) / (sigma * SQRT_2);
     let i = Complex64::new(0.0, 1.0);
-    // |w| ≤ 1 on the closed upper half plane, so a term whose factor exp(−x²) is below
-    // exp(−SKIP) = 4e-18 cannot change the result: skip its Faddeeva evaluation. For sharp blurs
-    // (the usual case) this leaves one w(z) call, or none, per evaluation.
-    const SKIP: f64 = 40.0;
-    let term = |x: f64, re: f64| {
-        if x * x > SKIP {
-            Complex64::new(0.0, 0.0)
-        } else {
-            (-x * x).exp() * Complex64::new(re, x.abs()).w()
-        }
-    };
     let t2 = term(x2, -y);
     if x1 >= 0.0 {
         let t1 = term(x1, y);
@@ -317,14 +319,6 @@ fn series_line_pos(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
     let i = Complex64::new(0.0, 1.0);
     let x1 = (FRAC_PI_2 - theta) / (sigma * SQRT_2);
     let x2 = (FRAC_PI_2 + theta) / (sigma * SQRT_2);
-    const SKIP: f64 = 40.0;
-    let term = |x: f64, re: f64| {
-        if x * x > SKIP {
-            Complex64::new(0.0, 0.0)
-        } else {
-            (-x * x).exp() * Complex64::new(re, x.abs()).w()
-        }
-    };
     let u1 = theta - FRAC_PI_2;
     let u2 = theta + FRAC_PI_2;
     let (g1, g2) = (gauss(u1, sigma), gauss(u2, sigma));
