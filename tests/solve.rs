@@ -184,7 +184,14 @@ fn a_bad_start_still_converges() {
 
 #[test]
 fn paper_baseline_and_holdout() {
-    let dir = default_session();
+    // The paper's procedure assumes the bare clamped cosine (as this session is rendered): from
+    // photos rendered with the entry transmission its per-radius σ0 comes out 40–60% low (35 mm:
+    // 2.50, 1.51, 0.83 mm against 4, 3, 2.2; measured 2026-12-01).
+    let session = make(SessionConfig {
+        entry_transmission: false,
+        ..SessionConfig::default()
+    });
+    let dir = session.path();
     let t = truth(dir);
     let p = solve_with(dir, "fit-paper.json", |o| o.method = Method::Paper);
     let pr = p.per_radius.as_ref().unwrap();
@@ -206,9 +213,11 @@ fn paper_baseline_and_holdout() {
     let dl = Vector3::from(d.light_direction.unwrap());
     assert!(Vector3::from(p.light_direction).angle(&dl) < 1e-9);
     // The joint fit with the light held: the detector's light, σ0 still within 1%.
+    // (the joint fits here with the model the session was rendered with).
     let held = solve_with(dir, "fit-hold.json", |o| {
         o.light_fit = LightFit::Hold;
         o.baseline = true;
+        o.entry_transmission = false;
     });
     assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
     // The baseline written beside a joint fit is the paper's method's own result.
@@ -223,7 +232,10 @@ fn paper_baseline_and_holdout() {
         .unwrap();
     assert_eq!(az.status, "fixed: from the detector");
     // Holdout: fit without the 15 mm sphere, predict it.
-    let h = solve_with(dir, "fit-holdout.json", |o| o.holdout = Some(15.0));
+    let h = solve_with(dir, "fit-holdout.json", |o| {
+        o.holdout = Some(15.0);
+        o.entry_transmission = false;
+    });
     // Without --baseline or --plots the baseline is not run.
     assert!(h.baseline.is_none());
     let ho = h.holdout.as_ref().unwrap();

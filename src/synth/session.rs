@@ -50,6 +50,9 @@ pub struct SessionConfig {
     pub material: Material,
     pub material_name: String,
     pub convolution: Convolution,
+    /// Render with the entry-side Fresnel transmission (off by default, like the model: the bare
+    /// clamped cosine, which the paper's procedure assumes).
+    pub entry_transmission: bool,
     /// Relative exposure (see [`crate::photo`]).
     pub exposure: f64,
     /// Shot-noise standard deviation at full scale (relative; variance ∝ signal).
@@ -115,6 +118,7 @@ impl Default for SessionConfig {
             },
             material_name: "synthetic wax".into(),
             convolution: Convolution::Wrapped,
+            entry_transmission: false,
             exposure: 1.2,
             noise: 0.01,
             read_noise: 5e-4,
@@ -154,6 +158,9 @@ pub struct SessionTruth {
     pub light_azimuth_deg: f64,
     pub light_elevation_deg: f64,
     pub cdrf_convolution: Convolution,
+    /// Whether the diffuse term blurs the entry-transmitted irradiance (false in older files).
+    #[serde(default)]
+    pub entry_transmission: bool,
     pub intrinsics: IntrinsicsFile,
     pub images: Vec<TruthImage>,
     pub render: RenderTruth,
@@ -387,6 +394,7 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     let (w, h) = (cam.width() as usize, cam.height() as usize);
     let model = Model {
         convolution: cfg.convolution,
+        entry_fresnel: cfg.entry_transmission,
         ..Model::default()
     };
     let params = Params {
@@ -587,6 +595,7 @@ pub fn generate(
         light_azimuth_deg: cfg.light.azimuth.to_degrees(),
         light_elevation_deg: cfg.light.elevation.to_degrees(),
         cdrf_convolution: cfg.convolution,
+        entry_transmission: cfg.entry_transmission,
         intrinsics: IntrinsicsFile::from_truth(cam),
         images: truth_images,
         render: RenderTruth {
