@@ -180,25 +180,46 @@ fn reduce(theta: f64) -> f64 {
     }
 }
 
-fn wrapped(theta: f64, sigma: f64) -> CdrfEval {
+impl std::ops::AddAssign for CdrfEval {
+    fn add_assign(&mut self, e: CdrfEval) {
+        self.value += e.value;
+        self.d_theta += e.d_theta;
+        self.d2_theta += e.d2_theta;
+        self.d_sigma += e.d_sigma;
+    }
+}
+
+/// The wrapped form from a line form and a Fourier series of the same source, θ reduced to
+/// [−π, π]: the line form for σ < 0.17 (images at ±2π lie ≥ π/2 outside the support:
+/// exp(−(π/2)²/2σ²) < 1e-18), the k = −1, 0, 1 images for σ < 0.85 (those at ±4π lie ≥ 5π/2
+/// outside: exp(−(5π/2)²/2σ²) < 1e-18), the Fourier series above.
+fn wrapped_by<T: std::ops::AddAssign>(
+    theta: f64,
+    sigma: f64,
+    line: impl Fn(f64) -> T,
+    fourier: impl Fn(f64) -> T,
+) -> T {
     let t = reduce(theta);
     if sigma < 0.17 {
-        // Images at ±2π lie ≥ π/2 outside the support: exp(−(π/2)²/2σ²) < 1e-18.
-        line(t, sigma)
+        line(t)
     } else if sigma < 0.85 {
-        // Images at ±4π lie ≥ 5π/2 outside the support: exp(−(5π/2)²/2σ²) < 1e-18.
-        let mut acc = line(t, sigma);
+        let mut acc = line(t);
         for k in [-1.0, 1.0] {
-            let e = line(t + 2.0 * PI * k, sigma);
-            acc.value += e.value;
-            acc.d_theta += e.d_theta;
-            acc.d2_theta += e.d2_theta;
-            acc.d_sigma += e.d_sigma;
+            acc += line(t + 2.0 * PI * k);
         }
         acc
     } else {
-        wrapped_fourier(t, sigma)
+        fourier(t)
     }
+}
+
+fn wrapped(theta: f64, sigma: f64) -> CdrfEval {
+    wrapped_by(
+        theta,
+        sigma,
+        |t| line(t, sigma),
+        |t| wrapped_fourier(t, sigma),
+    )
 }
 
 /// The CDRF with derivatives. σ ≥ 0 in radians. Non-finite input gives non-finite output.
@@ -303,10 +324,7 @@ pub struct SeriesEval {
 
 impl std::ops::AddAssign for SeriesEval {
     fn add_assign(&mut self, e: SeriesEval) {
-        self.f.value += e.f.value;
-        self.f.d_theta += e.f.d_theta;
-        self.f.d2_theta += e.f.d2_theta;
-        self.f.d_sigma += e.f.d_sigma;
+        self.f += e.f;
         self.d_param += e.d_param;
     }
 }
@@ -415,20 +433,12 @@ fn series_fourier(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
 pub fn eval_series(theta: f64, sigma: f64, s: &Series, conv: Convolution) -> SeriesEval {
     let mut e = match conv {
         Convolution::Line => series_line(theta, sigma, s),
-        Convolution::Wrapped => {
-            let t = reduce(theta);
-            if sigma < 0.17 {
-                series_line(t, sigma, s)
-            } else if sigma < 0.85 {
-                let mut acc = series_line(t, sigma, s);
-                for k in [-1.0, 1.0] {
-                    acc += series_line(t + 2.0 * PI * k, sigma, s);
-                }
-                acc
-            } else {
-                series_fourier(t, sigma, s)
-            }
-        }
+        Convolution::Wrapped => wrapped_by(
+            theta,
+            sigma,
+            |t| series_line(t, sigma, s),
+            |t| series_fourier(t, sigma, s),
+        ),
     };
     // The series approximates a non-negative source to ~1e-5; keep the result non-negative.
     e.f.value = e.f.value.max(0.0);
