@@ -4,7 +4,9 @@
 //! (seed, image, row), so the parallel schedule cannot change the output.
 
 pub mod checkerboard;
+pub mod dielectric;
 pub mod session;
+pub mod volpath;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -331,7 +331,7 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
 
 /// Pixel bounding box [x0, y0, x1, y1] of a sphere's silhouette (through the lens distortion),
 /// padded by `pad` pixels; `None` when the sphere is not wholly in front of the camera.
-fn silhouette_box(cam: &Camera, s: &Sphere, pad: f64) -> Option<[f64; 4]> {
+pub(crate) fn silhouette_box(cam: &Camera, s: &Sphere, pad: f64) -> Option<[f64; 4]> {
     let half = s.cone_half_angle()?;
     let axis = s.center.normalize();
     let e1 = axis
