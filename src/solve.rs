@@ -406,7 +406,9 @@ pub struct FitFile {
     pub std_source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jackknife: Option<JackknifeJson>,
-    /// How the light was treated: "prior" (the detector's light as a prior), "free", "hold".
+    /// How the light was treated: "prior" (the detector's light as a prior), "free", "hold", or
+    /// "prior, then hold" (the shading pulled the light beyond PULL_WARN of its errors, so it was
+    /// held at the detector's; `light_pull` says how far).
     #[serde(default)]
     pub light_fit: String,
     /// How far the fit moved the detector's light, in the prior's (or detector's) errors.
@@ -982,6 +984,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         /// The model the parameters belong to (what predicts the photos from them).
         model: Model,
         prior_tension: [f64; N_PARAMS],
+        light_fit: String,
     }
     let outcome = match opts.method {
         Method::Joint => {
@@ -998,7 +1001,50 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                     e
                 }
             };
-            let jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            let mut jf: JointFit = joint::fit_joint(&setup(opts, &l, ext, opts.reduction), &fitted);
+            // A light pulled beyond PULL_WARN of the detector's errors is pulled by the model's
+            // error, not supported by the data: hold it at the detector's and refit. Each
+            // parameter's shift between the two fits is the light's systematic on it and joins its
+            // std (docs/uncertainty.md, "When the shading pulls the light").
+            let mut fit_opts = opts.clone();
+            let mut light_shift = [0.0; N_PARAMS];
+            let pulled = jf.light_pull.filter(|p| p.pull > joint::PULL_WARN);
+            if let (LightFit::Prior, Some(pull), Some(_)) = (opts.light_fit, pulled, l.light) {
+                fit_opts.light_fit = LightFit::Hold;
+                let held = joint::fit_joint(&setup(&fit_opts, &l, ext, opts.reduction), &fitted);
+                let (a, b) = (jf.fit.params.to_vec(), held.fit.params.to_vec());
+                light_shift = std::array::from_fn(|k| {
+                    if held.fit.free[k] {
+                        (a[k] - b[k]).abs()
+                    } else {
+                        0.0
+                    }
+                });
+                let moved_sigma0: Vec<String> = (0..3)
+                    .map(|c| format!("{:.3}", jf.fit.params.material.sigma0_mm[c]))
+                    .collect();
+                notes.push(format!(
+                    "the light is held at the highlights' estimate: the shading pulled it {:.1} of its errors, further than the data support; with the pulled light σ0 was {} mm, and each parameter's shift between the two fits joins its std",
+                    pull.pull,
+                    moved_sigma0.join(", ")
+                ));
+                jf = JointFit {
+                    light_pull: Some(pull),
+                    ..held
+                };
+                let why = format!("held: the detector's (pulled {:.1} std)", pull.pull);
+                jf.status[idx::AZIMUTH] = why.clone();
+                jf.status[idx::ELEVATION] = why;
+            }
+            // A light taken from the detector keeps the detector's error.
+            if fit_opts.light_fit == LightFit::Hold && opts.start_light.is_none() {
+                if let (Some(s), Some(d)) = (l.light_std, l.light) {
+                    let el = LightAngles::from_direction(&d).elevation;
+                    light_shift[idx::AZIMUTH] = s / el.cos().abs().max(1e-3);
+                    light_shift[idx::ELEVATION] = s;
+                }
+            }
+            let opts = &fit_opts;
             let jack = if opts.jackknife {
                 let fitted_ext = Extensions::of_fit(&jf.fit.free);
                 let j = jackknife(opts, &l, &fitted, &jf, fitted_ext);
@@ -1065,7 +1111,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 params: jf.fit.params,
                 std: std::array::from_fn(|k| {
                     let spread = jack.as_ref().map_or(0.0, |j| j.std[k]);
-                    let s = jf.fit.std[k].max(spread) * jf.prior_tension[k];
+                    let s = (jf.fit.std[k].max(spread) * jf.prior_tension[k]).hypot(light_shift[k]);
                     if k == idx::ETA {
                         s.hypot(jf.eta_systematic)
                     } else {
@@ -1098,6 +1144,11 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 per_radius: None,
                 paper: None,
                 light_pull: jf.light_pull,
+                light_fit: if pulled.is_some() && opts.light_fit == LightFit::Hold {
+                    "prior, then hold".into()
+                } else {
+                    opts.light_fit.name().into()
+                },
             }
         }
         Method::Paper => {
@@ -1150,6 +1201,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 per_radius: Some(pf.per_radius.clone()),
                 paper: Some(pf),
                 light_pull: None,
+                light_fit: LightFit::Hold.name().into(),
             }
         }
     };
@@ -1295,10 +1347,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             }
         ),
         jackknife: outcome.jackknife.as_ref().map(|j| j.json.clone()),
-        light_fit: match opts.method {
-            Method::Joint => opts.light_fit.name().into(),
-            Method::Paper => LightFit::Hold.name().into(),
-        },
+        light_fit: outcome.light_fit.clone(),
         light_pull: outcome.light_pull,
         parameters: (0..N_PARAMS)
             .map(|k| ParamJson {

@@ -207,3 +207,77 @@ fn jade_errors_are_covered_or_flagged() {
         assert!(h.rel_rmse < 0.056, "{h:?}");
     }
 }
+
+/// One of the project's own physically based sessions (datasets/pbr-*, `workbench synth pbr`,
+/// docs/pbr.md) solved with the defaults: the shading pulls the light beyond PULL_WARN of the
+/// detector's errors, so the light is held at the detector's; then the light's and η's errors
+/// lie within 3 of their stated std, and each radius is predicted from the others within 10% of
+/// what was measured (2026-12-01, `workbench solve datasets/pbr-<name>`).
+fn pbr_session_defaults(name: &str, heldout_measured: [f64; 5]) {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets")
+        .join(name);
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(&src).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+    }
+    let truth: workbench::synth::volpath::PbrTruth =
+        serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
+    let l = Vector3::from(truth.light.direction_to_light_camera_frame);
+    let f = solve(dir.path(), |_| {});
+    let err = Vector3::from(f.light_direction).angle(&l).to_degrees();
+    let pull = f.light_pull.expect("the detector's light is known");
+    let eta = param(&f, "eta");
+    let j = f.jackknife.as_ref().unwrap();
+    let held: Vec<f64> = j.heldout.iter().map(|h| 100.0 * h.rel_rmse).collect();
+    println!(
+        "{name}: light {err:.3}° off (± {:.3}°, pull {:.1}, {}); η {:.3} ± {:.3} (truth {}); σ0 {:.3?} ± {:.3?}; held out {held:.2?}%",
+        f.std.light_deg,
+        pull.pull,
+        f.light_fit,
+        eta.value,
+        eta.std,
+        truth.material.eta,
+        f.sigma0_mm,
+        f.std.sigma0_mm
+    );
+    assert!(
+        pull.pull > workbench::joint::PULL_WARN,
+        "pull {}",
+        pull.pull
+    );
+    assert_eq!(f.light_fit, "prior, then hold");
+    assert!(f
+        .notes
+        .iter()
+        .any(|n| n.contains("the light is held at the highlights' estimate")));
+    assert!(
+        err < 0.3 && err <= 3.0 * f.std.light_deg,
+        "light {err}° ± {}°",
+        f.std.light_deg
+    );
+    assert!(
+        (eta.value - truth.material.eta).abs() <= 3.0 * eta.std,
+        "η {} ± {}",
+        eta.value,
+        eta.std
+    );
+    assert_eq!(j.radii, vec![35.0, 30.0, 25.0, 20.0, 15.0]);
+    for (h, m) in held.iter().zip(heldout_measured) {
+        assert!(
+            *h < 1.1 * m,
+            "held out {held:?}% against {heldout_measured:?}%"
+        );
+    }
+}
+
+#[test]
+fn own_wax_session_defaults() {
+    pbr_session_defaults("pbr-wax", [3.69, 3.38, 3.56, 3.95, 5.72]);
+}
+
+#[test]
+fn own_soap_session_defaults() {
+    pbr_session_defaults("pbr-soap", [5.10, 4.23, 4.62, 6.06, 8.02]);
+}
