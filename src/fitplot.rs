@@ -19,6 +19,7 @@ use crate::plot::{
     VERMILLION,
 };
 use crate::solve::FitFile;
+use crate::stats::percentile;
 use plotters::style::RGBColor;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -120,15 +121,6 @@ impl Group<'_> {
     ) -> impl Iterator<Item = &'b T> + 'b {
         self.spheres.iter().flat_map(move |e| f(e).iter())
     }
-}
-
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let k = ((v.len() - 1) as f64 * q).round() as usize;
-    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }
 
 /// Medians of y in windows of x of width `window` every `step`, where a window holds at least

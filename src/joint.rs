@@ -231,6 +231,8 @@ pub struct JointFit {
     /// The disagreement between η from the whole fit and from the highlight alone when it is
     /// beyond their errors (0 otherwise; only with the irradiance given).
     pub eta_systematic: f64,
+    /// χ²/dof against the measured noise: (residual / noise)² per observation row.
+    pub chi2_dof: f64,
 }
 
 /// The Particle Data Group's scale factor for a parameter with a prior: the prior (m_p ± σ_p)
@@ -960,6 +962,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         light_pull,
         prior_tension: tension,
         eta_systematic,
+        chi2_dof: chi2,
     }
 }
 

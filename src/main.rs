@@ -376,6 +376,26 @@ enum Synth {
     Pbr(PbrArgs),
 }
 
+/// The light of a synthetic session.
+#[derive(Args, Clone, Copy)]
+struct LightArgs {
+    /// Light azimuth in degrees (0 = from the camera, positive = from the right).
+    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true)]
+    light_azimuth: f64,
+    /// Light elevation in degrees (positive = from above).
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    light_elevation: f64,
+}
+
+impl LightArgs {
+    fn angles(&self) -> LightAngles {
+        LightAngles {
+            azimuth: self.light_azimuth.to_radians(),
+            elevation: self.light_elevation.to_radians(),
+        }
+    }
+}
+
 #[derive(Args)]
 struct PbrArgs {
     /// Output folder (created; files in it are replaced).
@@ -386,12 +406,8 @@ struct PbrArgs {
     radii: Floats,
     #[command(flatten)]
     camera: CameraArgs,
-    /// Light azimuth in degrees (0 = from the camera, positive = from the right).
-    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true)]
-    light_azimuth: f64,
-    /// Light elevation in degrees (positive = from above).
-    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
-    light_elevation: f64,
+    #[command(flatten)]
+    light: LightArgs,
     /// Extinction coefficient σt of the medium, 1/mm (one for all channels).
     #[arg(long, default_value_t = 1.0)]
     sigma_t: f64,
@@ -516,12 +532,8 @@ struct SessionArgs {
     layout: LayoutArg,
     #[command(flatten)]
     camera: CameraArgs,
-    /// Light azimuth in degrees (0 = from the camera, positive = from the right).
-    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true)]
-    light_azimuth: f64,
-    /// Light elevation in degrees (positive = from above).
-    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
-    light_elevation: f64,
+    #[command(flatten)]
+    light: LightArgs,
     /// Scattering length σ0 in mm, one value or r,g,b.
     #[arg(long, default_value = "4,3,2.2", value_parser = triple)]
     sigma0: [f64; 3],
@@ -675,10 +687,7 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
             LayoutArg::Row => Layout::Row,
         },
         camera: a.camera.camera()?,
-        light: LightAngles {
-            azimuth: a.light_azimuth.to_radians(),
-            elevation: a.light_elevation.to_radians(),
-        },
+        light: a.light.angles(),
         material: Material {
             sigma0_mm: a.sigma0,
             albedo: a.albedo,
@@ -729,10 +738,7 @@ fn synth_pbr(a: PbrArgs, quiet: bool) -> Result<()> {
     let cfg = volpath::PbrConfig {
         radii_mm: a.radii,
         camera: a.camera.camera()?,
-        light: LightAngles {
-            azimuth: a.light_azimuth.to_radians(),
-            elevation: a.light_elevation.to_radians(),
-        },
+        light: a.light.angles(),
         medium: volpath::Medium {
             sigma_t: a.sigma_t,
             albedo: a.albedo,

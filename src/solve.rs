@@ -335,6 +335,10 @@ pub struct ConvergenceJson {
     /// Channel residuals down-weighted by the Huber loss in the last round.
     pub downweighted: usize,
     pub robust_loss: Option<String>,
+    /// χ²/dof of the joint fit against the measured pixel noise (its square root: the residuals
+    /// over the noise); null for the paper's method and in older files.
+    #[serde(default)]
+    pub chi2_per_dof: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -1140,6 +1144,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                     robust_loss: opts
                         .robust
                         .then(|| format!("huber, k = {}", joint::HUBER_K)),
+                    chi2_per_dof: Some(jf.chi2_dof),
                 },
                 per_radius: None,
                 paper: None,
@@ -1197,6 +1202,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                     stages: vec![],
                     downweighted: 0,
                     robust_loss: None,
+                    chi2_per_dof: None,
                 },
                 per_radius: Some(pf.per_radius.clone()),
                 paper: Some(pf),
@@ -1523,9 +1529,13 @@ pub fn summary(f: &FitFile) -> String {
     }
     let _ = writeln!(
         s,
-        "rmse     {:.3e} ({:.2}% of the data's RMS)",
+        "rmse     {:.3e} ({:.2}% of the data's RMS){}",
         f.rmse.overall,
-        100.0 * f.rmse.relative
+        100.0 * f.rmse.relative,
+        f.convergence
+            .chi2_per_dof
+            .map(|c| format!(", {:.2}× the measured noise (χ²/dof {c:.2})", c.sqrt()))
+            .unwrap_or_default()
     );
     for sp in &f.rmse.spheres {
         let _ = writeln!(

@@ -1,4 +1,4 @@
-//! Small statistics the error bars need: Student's t distribution (docs/uncertainty.md).
+//! Small statistics: Student's t distribution for the error bars (docs/uncertainty.md), percentiles.
 
 use std::f64::consts::PI;
 
@@ -77,4 +77,14 @@ mod tests {
         // Large ν: the normal's ±2σ.
         assert!((t_quantile_central(TWO_SIGMA, 400) - 2.0).abs() < 0.01);
     }
+}
+
+/// The q-quantile (0 ≤ q ≤ 1) of the finite values, the nearest rank; NaN when there are none.
+pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }

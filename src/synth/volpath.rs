@@ -31,6 +31,7 @@ use crate::photo;
 use crate::session::{self, Session, SessionImage, SessionSphere};
 use crate::specular::ggx_d;
 use crate::sphere::Sphere;
+use crate::stats::percentile;
 use nalgebra::{Vector2, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -432,14 +433,6 @@ pub struct PbrOutput {
     pub truth: PbrTruth,
 }
 
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
 /// Render the session into `out`: one photo per radius (`r35.png` …, 16-bit linear RGB), scaled
 /// so that the 99.97th percentile of the subsurface radiance over all photos is 0.6 of full
 /// scale; `session.json`, `intrinsics.json` (the rendering camera) and `truth.json`.
@@ -520,7 +513,7 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
             .collect();
         // (a − b)/2 has the standard deviation of the mean (a + b)/2; the median of |N(0, s²)|
         // is 0.6745 s.
-        let noise = percentile(rel, 0.5) / 0.6745;
+        let noise = (percentile(rel, 0.5) / 0.6745).max(0.0); // no lit pixel: 0
         let path = out.join(&file);
         photo::write_png16_rgb(&path, img.width as u32, img.height as u32, &q)?;
         images.push(path);
