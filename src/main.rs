@@ -94,9 +94,10 @@ struct SolveArgs {
     /// Plain least squares instead of the Huber loss.
     #[arg(long)]
     no_robust: bool,
-    /// Model extensions: none, auto (chosen by held-out error; needs 4 or more radii), or any of
-    /// sigma-exponent, albedo-curvature, two-gaussian (comma-separated; both = the first two).
-    #[arg(long, default_value = "none", value_parser = parse_extensions)]
+    /// Model extensions: default (albedo-curvature with 3 or more radii, none otherwise), none,
+    /// auto (chosen by held-out error; needs 4 or more radii), or any of sigma-exponent,
+    /// albedo-curvature, two-gaussian (comma-separated; both = the first two).
+    #[arg(long, default_value = "default", value_parser = parse_extensions)]
     extensions: workbench::solve::ExtensionChoice,
     /// Start σ0 (mm), one value or r,g,b, instead of the search over the data.
     #[arg(long, value_parser = triple)]
@@ -326,6 +327,7 @@ fn parse_extensions(s: &str) -> std::result::Result<workbench::solve::ExtensionC
     use workbench::joint::Extensions;
     use workbench::solve::ExtensionChoice;
     match s {
+        "default" => return Ok(ExtensionChoice::Default),
         "none" => return Ok(ExtensionChoice::None),
         "auto" => return Ok(ExtensionChoice::Auto),
         "both" => {

@@ -35,14 +35,22 @@ pub enum Method {
     Paper,
 }
 
-/// Model extensions: none, the ones named, or chosen by held-out error.
+/// Model extensions: the default, none, the ones named, or chosen by held-out error.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ExtensionChoice {
+    /// The albedo's curvature dependence where 3 or more radii are fitted, plain otherwise:
+    /// what lowered the extrapolation to a held-out radius on every physically based session
+    /// (docs/uncertainty.md, "Three physically based sessions").
     #[default]
+    Default,
     None,
     On(Extensions),
     Auto,
 }
+
+/// Distinct radii the default extension needs (its b against the albedo needs two radii besides
+/// the one they share).
+pub const DEFAULT_EXTENSION_RADII: usize = 3;
 
 #[derive(Clone, Debug)]
 pub struct Options {
@@ -86,7 +94,7 @@ impl Options {
             irradiance: None,
             reduction: Reduction::Auto,
             robust: true,
-            extensions: ExtensionChoice::None,
+            extensions: ExtensionChoice::Default,
             start_sigma0: None,
             start_light: None,
             redetect: false,
@@ -995,6 +1003,23 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             let ext = match opts.extensions {
                 ExtensionChoice::None => Extensions::default(),
                 ExtensionChoice::On(e) => e,
+                ExtensionChoice::Default => {
+                    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
+                    radii.sort_by(f64::total_cmp);
+                    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+                    if radii.len() >= DEFAULT_EXTENSION_RADII {
+                        Extensions {
+                            albedo_curvature: true,
+                            ..Extensions::default()
+                        }
+                    } else {
+                        l.skipped.push(format!(
+                            "albedo curvature (the default extension): {} radii, it needs {DEFAULT_EXTENSION_RADII}",
+                            radii.len()
+                        ));
+                        Extensions::default()
+                    }
+                }
                 ExtensionChoice::Auto => {
                     let t = Instant::now();
                     let mc = choose_extensions(opts, &l, &fitted);
