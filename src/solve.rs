@@ -38,9 +38,10 @@ pub enum Method {
 /// Model extensions: the default, none, the ones named, or chosen by held-out error.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ExtensionChoice {
-    /// The albedo's curvature dependence where 3 or more radii are fitted, plain otherwise:
-    /// what lowered the extrapolation to a held-out radius on every physically based session
-    /// (docs/uncertainty.md, "Three physically based sessions").
+    /// The albedo's curvature dependence where 3 or more radii are fitted, plain otherwise: what
+    /// lowered the extrapolation to a held-out radius on every physically based session without
+    /// hurting the own-model stress sessions (docs/uncertainty.md, "Three physically based
+    /// sessions").
     #[default]
     Default,
     None,
@@ -48,8 +49,8 @@ pub enum ExtensionChoice {
     Auto,
 }
 
-/// Distinct radii the default extension needs (its b against the albedo needs two radii besides
-/// the one they share).
+/// Distinct radii the default extension needs (b is an exponential in 1/r: two radii fix the
+/// albedo and b, a third is what tests them).
 pub const DEFAULT_EXTENSION_RADII: usize = 3;
 
 #[derive(Clone, Debug)]
