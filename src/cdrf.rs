@@ -30,7 +30,7 @@ pub enum Convolution {
 }
 
 /// The CDRF and its derivatives at one (θ, σ).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CdrfEval {
     /// f(θ; σ), in [0, 1].
     pub value: f64,
@@ -345,12 +345,7 @@ fn series_line_pos(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
     let mut rot = Complex64::new(1.0, 0.0); // e^{ikθ}
     let mut ik = Complex64::new(1.0, 0.0); // i^k
     let mut out = SeriesEval {
-        f: CdrfEval {
-            value: 0.0,
-            d_theta: 0.0,
-            d2_theta: 0.0,
-            d_sigma: 0.0,
-        },
+        f: CdrfEval::default(),
         d_param: 0.0,
     };
     for (k, (&a, &da)) in s.coeffs.iter().zip(&s.d_coeffs).enumerate() {
@@ -382,12 +377,7 @@ fn series_line(theta: f64, sigma: f64, s: &Series) -> SeriesEval {
     if sigma < SIGMA_ZERO {
         // The unblurred source with its one-sided derivatives.
         let inside = theta.cos() > 0.0;
-        let mut f = CdrfEval {
-            value: 0.0,
-            d_theta: 0.0,
-            d2_theta: 0.0,
-            d_sigma: 0.0,
-        };
+        let mut f = CdrfEval::default();
         let mut d_param = 0.0;
         if inside {
             for (k, (&a, &da)) in s.coeffs.iter().zip(&s.d_coeffs).enumerate() {

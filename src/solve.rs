@@ -226,6 +226,14 @@ pub struct Jackknife {
     pub json: JackknifeJson,
 }
 
+/// The different radii among the spheres (mm), smallest first.
+fn distinct_radii(spheres: &[&SphereData]) -> Vec<f64> {
+    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    radii.sort_by(f64::total_cmp);
+    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    radii
+}
+
 /// Leave-one-radius-out refits of a joint fit: the fit is repeated with every radius left out in
 /// turn (warm-started from the full fit, on 2° cells or its own coarser level), and the spread of
 /// the n refits gives each parameter's jackknife standard error √((n−1)/n · Σ(θᵢ − θ̄)²),
@@ -241,9 +249,8 @@ pub fn jackknife(
 ) -> Option<Jackknife> {
     use rayon::prelude::*;
     let t = Instant::now();
-    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
-    radii.sort_by(|a, b| b.total_cmp(a));
-    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let mut radii = distinct_radii(fitted);
+    radii.reverse();
     if radii.len() < 3 {
         return None;
     }
@@ -788,9 +795,7 @@ fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> S
 /// relative RMSE (the simplest within 1% of it) wins if it beats the plain model by more than 2%
 /// of its error.
 pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> ModelChoice {
-    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
-    radii.sort_by(|a, b| a.total_cmp(b));
-    radii.dedup();
+    let radii = distinct_radii(fitted);
     // Simplest first: one extension (the kernel's shape first), then pairs.
     let ext = |two_gaussian, sigma_exponent, albedo_curvature| Extensions {
         sigma_exponent,
@@ -1005,9 +1010,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 ExtensionChoice::None => Extensions::default(),
                 ExtensionChoice::On(e) => e,
                 ExtensionChoice::Default => {
-                    let mut radii: Vec<f64> = fitted.iter().map(|s| s.radius_mm).collect();
-                    radii.sort_by(f64::total_cmp);
-                    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+                    let radii = distinct_radii(&fitted);
                     if radii.len() >= DEFAULT_EXTENSION_RADII {
                         Extensions {
                             albedo_curvature: true,

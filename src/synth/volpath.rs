@@ -456,19 +456,18 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
         };
         let t0 = std::time::Instant::now();
         let img = render(cam, &scene, cfg.spp, cfg.seed, k as u64);
-        renders.push((r, img, t0.elapsed().as_secs_f64()));
+        let mean = img.mean();
+        renders.push((r, img, mean, t0.elapsed().as_secs_f64()));
         pb.inc(1);
     }
     pb.finish_and_clear();
     let subsurface: Vec<f64> = renders
         .iter()
-        .flat_map(|(_, img, _)| {
-            img.mean()
-                .into_iter()
-                .zip(img.specular.clone())
+        .flat_map(|(_, img, mean, _)| {
+            mean.iter()
+                .zip(&img.specular)
                 .filter(|(v, _)| v.iter().any(|c| *c > 0.0))
                 .flat_map(|(v, s)| v.map(|c| c - s))
-                .collect::<Vec<_>>()
         })
         .collect();
     let reference = percentile(subsurface, 0.9997);
@@ -481,13 +480,12 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut images = Vec::new();
     let mut photos = Vec::new();
-    for (r, img, secs) in &renders {
+    for (r, img, mean, secs) in &renders {
         let file = if r.fract() == 0.0 {
             format!("r{r:.0}.png")
         } else {
             format!("r{r}.png")
         };
-        let mean = img.mean();
         let q: Vec<u16> = mean
             .iter()
             .flat_map(|v| v.map(|c| ((c * scale).clamp(0.0, 1.0) * 65535.0).round() as u16))
