@@ -125,6 +125,9 @@ pub struct ImageDetection {
     pub height: u32,
     /// Relative exposure dividing the samples' radiance (null: unknown).
     pub exposure: Option<f64>,
+    /// What the EXIF reader lost, substituted or ignored, one line each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exif_notes: Vec<String>,
     /// Combined over this photo's spheres.
     pub light_direction: Option<[f64; 3]>,
     pub light_std_deg: Option<f64>,
@@ -589,6 +592,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
             width: img.width,
             height: img.height,
             exposure: info.exposure,
+            exif_notes: info.exif_notes.clone(),
             light_direction: image_lights[i].as_ref().map(|c| arr3(&c.light)),
             light_std_deg: image_lights[i].as_ref().map(|c| c.std().to_degrees()),
             spheres,

@@ -17,6 +17,7 @@ pub mod detect;
 pub mod entry;
 pub mod error;
 pub mod fitplot;
+pub mod formats;
 pub mod fresnel;
 pub mod highlight;
 pub mod intrinsics;

@@ -940,6 +940,9 @@ fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
         )
     };
     for im in &d.images {
+        for n in &im.exif_notes {
+            println!("exif     {:<12} {n}", im.file);
+        }
         for (k, s) in im.spheres.iter().enumerate() {
             let light = match (&s.light_direction, &s.highlight, &s.no_highlight) {
                 (Some(l), Some(h), _) => format!(
@@ -1240,6 +1243,9 @@ fn check(session: PathBuf) -> Result<()> {
             if im.linear { "linear" } else { "sRGB" },
             radii.join(" ")
         );
+        for n in &im.exif_notes {
+            println!("exif     {:<12} {n}", im.file);
+        }
     }
     let radii: std::collections::BTreeSet<String> = r
         .images

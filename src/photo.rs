@@ -1,17 +1,10 @@
-//! Photo files: the sRGB transfer curve, workbench's exposure convention, EXIF, and writing
-//! 16-bit linear PNG, 8-bit sRGB JPEG (with EXIF) and 8-bit greyscale images — atomically.
-//!
-//! **Exposure convention.** A linear pixel value (full scale = 1) is scene radiance times the
-//! *relative exposure*
-//!
-//!     exposure = ExposureTime[s] · (ISO / 100) · (8 / FNumber)² · 30
-//!
-//! i.e. exposure 1 is 1/30 s at f/8 and ISO 100. Radiances of photos taken at different settings
-//! are compared after dividing by it.
+//! Photo files: the sRGB transfer curve, decoding, and writing 16-bit linear PNG, 8-bit sRGB JPEG
+//! (with EXIF) and 8-bit greyscale images — atomically. EXIF and the exposure convention are in
+//! `crate::formats::exif`.
 
 use crate::error::{Error, Result};
 use crate::output::write_atomic;
-use exif::{experimental::Writer, Field, In, Rational, Tag, Value};
+pub use crate::formats::exif::{relative_exposure, ExifInfo};
 use image::codecs::jpeg::JpegEncoder;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
@@ -34,137 +27,6 @@ pub fn srgb_decode(y: f64) -> f64 {
         y / 12.92
     } else {
         ((y + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// The photographic settings and camera identity a photo's EXIF carries.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ExifInfo {
-    pub make: String,
-    pub model: String,
-    pub exposure_time_s: f64,
-    pub iso: u32,
-    pub f_number: f64,
-    pub focal_length_mm: f64,
-    pub focal_length_35mm: Option<u32>,
-}
-
-/// The relative exposure of the convention above.
-pub fn relative_exposure(exposure_time_s: f64, iso: f64, f_number: f64) -> f64 {
-    exposure_time_s * (iso / 100.0) * (8.0 / f_number).powi(2) * 30.0
-}
-
-impl ExifInfo {
-    pub fn relative_exposure(&self) -> f64 {
-        relative_exposure(self.exposure_time_s, self.iso as f64, self.f_number)
-    }
-
-    /// Settings at ISO 100 and f/8 that give a relative exposure (only the time varies).
-    pub fn for_exposure(exposure: f64, make: &str, model: &str, focal_mm: f64, f35: u32) -> Self {
-        ExifInfo {
-            make: make.into(),
-            model: model.into(),
-            exposure_time_s: exposure / 30.0,
-            iso: 100,
-            f_number: 8.0,
-            focal_length_mm: focal_mm,
-            focal_length_35mm: Some(f35),
-        }
-    }
-
-    /// Encode as a TIFF/Exif block (the payload of a JPEG APP1 "Exif" segment).
-    pub fn to_tiff(&self) -> Result<Vec<u8>> {
-        // Rationals with a fixed denominator (ExposureTime keeps a power-of-ten denominator so that
-        // 1/30 s survives with 9 significant digits).
-        let rational = |v: f64, denom: u32| Rational {
-            num: (v * denom as f64).round() as u32,
-            denom,
-        };
-        let fields = [
-            Field {
-                tag: Tag::Make,
-                ifd_num: In::PRIMARY,
-                value: Value::Ascii(vec![self.make.clone().into_bytes()]),
-            },
-            Field {
-                tag: Tag::Model,
-                ifd_num: In::PRIMARY,
-                value: Value::Ascii(vec![self.model.clone().into_bytes()]),
-            },
-            Field {
-                tag: Tag::ExposureTime,
-                ifd_num: In::PRIMARY,
-                value: Value::Rational(vec![rational(self.exposure_time_s, 1_000_000_000)]),
-            },
-            Field {
-                tag: Tag::FNumber,
-                ifd_num: In::PRIMARY,
-                value: Value::Rational(vec![rational(self.f_number, 1000)]),
-            },
-            Field {
-                tag: Tag::PhotographicSensitivity,
-                ifd_num: In::PRIMARY,
-                value: Value::Short(vec![self.iso.min(65535) as u16]),
-            },
-            Field {
-                tag: Tag::FocalLength,
-                ifd_num: In::PRIMARY,
-                value: Value::Rational(vec![rational(self.focal_length_mm, 1000)]),
-            },
-            Field {
-                tag: Tag::FocalLengthIn35mmFilm,
-                ifd_num: In::PRIMARY,
-                value: Value::Short(vec![self.focal_length_35mm.unwrap_or(0).min(65535) as u16]),
-            },
-        ];
-        let mut w = Writer::new();
-        for f in &fields {
-            w.push_field(f);
-        }
-        let mut buf = std::io::Cursor::new(Vec::new());
-        w.write(&mut buf, false)
-            .map_err(|e| Error::Argument(format!("cannot encode EXIF: {e}")))?;
-        Ok(buf.into_inner())
-    }
-
-    /// Read the EXIF of a JPEG/TIFF/PNG file; `None` when it has none or lacks the settings.
-    pub fn read(path: &Path) -> Result<Option<ExifInfo>> {
-        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        let mut r = std::io::BufReader::new(file);
-        let ex = match exif::Reader::new().read_from_container(&mut r) {
-            Ok(ex) => ex,
-            Err(exif::Error::NotFound(_)) => return Ok(None),
-            Err(e) => return Err(Error::invalid(path, format!("unreadable EXIF: {e}"))),
-        };
-        let get = |tag| ex.get_field(tag, In::PRIMARY);
-        let ascii = |tag| match get(tag).map(|f| &f.value) {
-            Some(Value::Ascii(v)) if !v.is_empty() => String::from_utf8_lossy(&v[0])
-                .trim_end_matches('\0')
-                .trim()
-                .to_string(),
-            _ => String::new(),
-        };
-        let rational = |tag| match get(tag).map(|f| &f.value) {
-            Some(Value::Rational(v)) if !v.is_empty() && v[0].denom != 0 => Some(v[0].to_f64()),
-            _ => None,
-        };
-        let uint = |tag| get(tag).and_then(|f| f.value.get_uint(0));
-        let (Some(t), Some(n), Some(iso)) = (
-            rational(Tag::ExposureTime),
-            rational(Tag::FNumber),
-            uint(Tag::PhotographicSensitivity),
-        ) else {
-            return Ok(None);
-        };
-        Ok(Some(ExifInfo {
-            make: ascii(Tag::Make),
-            model: ascii(Tag::Model),
-            exposure_time_s: t,
-            iso,
-            f_number: n,
-            focal_length_mm: rational(Tag::FocalLength).unwrap_or(f64::NAN),
-            focal_length_35mm: uint(Tag::FocalLengthIn35mmFilm).filter(|&v| v > 0),
-        }))
     }
 }
 
@@ -261,13 +123,6 @@ mod tests {
             let x = i as f64 / 1000.0;
             assert!((srgb_decode(srgb_encode(x)) - x).abs() < 1e-12);
         }
-    }
-
-    #[test]
-    fn reference_exposure_is_one() {
-        assert!((relative_exposure(1.0 / 30.0, 100.0, 8.0) - 1.0).abs() < 1e-12);
-        assert!((relative_exposure(1.0 / 60.0, 400.0, 8.0) - 2.0).abs() < 1e-12);
-        assert!((relative_exposure(1.0 / 30.0, 100.0, 4.0) - 4.0).abs() < 1e-12);
     }
 }
 

@@ -20,7 +20,7 @@ pub struct SessionImage {
     pub file: String,
     /// Spheres in the photo, left to right.
     pub spheres: Vec<SessionSphere>,
-    /// Relative exposure (see [`crate::photo`]); overrides EXIF.
+    /// Relative exposure (see [`crate::formats::exif`]); overrides EXIF.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure: Option<f64>,
     /// Whether pixel values are linear; default: 16-bit/float linear, 8-bit sRGB.
@@ -153,6 +153,8 @@ pub struct ImageInfo {
     /// Relative exposure, and where it came from ("session.json" or "EXIF").
     pub exposure: Option<f64>,
     pub exposure_source: Option<&'static str>,
+    /// What the EXIF reader lost, substituted or ignored, one line each.
+    pub exif_notes: Vec<String>,
     pub linear: bool,
     pub radii_mm: Vec<f64>,
 }
@@ -165,6 +167,67 @@ pub struct SessionReport {
     pub intrinsics_file: Option<PathBuf>,
     pub camera: Option<crate::camera::Camera>,
     pub images: Vec<ImageInfo>,
+}
+
+/// The EXIF exposures of the photos without one in session.json. A photo lacking ISO or f-number
+/// is compared at the value the other photos share (100 and f/8 when none has it); when the others
+/// differ in it, the photo is refused, naming the field.
+fn exif_exposures(
+    session_file: &Path,
+    images: &mut [ImageInfo],
+    exifs: &[Option<crate::photo::ExifInfo>],
+) -> Result<()> {
+    use crate::formats::exif::{REFERENCE_F_NUMBER, REFERENCE_ISO};
+    let from_exif: Vec<usize> = (0..images.len())
+        .filter(|&i| images[i].exposure.is_none())
+        .filter(|&i| exifs[i].as_ref().is_some_and(|e| e.exposure_time_s.is_some()))
+        .collect();
+    // The value the photos that have the field share, or `reference` when none has it.
+    let shared = |field: &dyn Fn(&crate::photo::ExifInfo) -> Option<f64>,
+                  name: &str,
+                  reference: f64|
+     -> Result<f64> {
+        let mut have: Vec<f64> = from_exif
+            .iter()
+            .filter_map(|&i| exifs[i].as_ref().and_then(field))
+            .collect();
+        have.sort_by(f64::total_cmp);
+        have.dedup_by(|a, b| (*a - *b).abs() <= 1e-6 * b.abs());
+        let lacking = from_exif
+            .iter()
+            .find(|&&i| exifs[i].as_ref().and_then(field).is_none());
+        match (have.len(), lacking) {
+            (0, _) => Ok(reference),
+            (1, _) => Ok(have[0]),
+            (_, Some(&i)) => Err(Error::invalid(
+                &images[i].path,
+                format!(
+                    "EXIF has no {name} while the session's other photos differ in it ({}): its exposure cannot be compared (give \"exposure\" in {})",
+                    have.iter().map(|v| format!("{v}")).collect::<Vec<_>>().join(", "),
+                    session_file.display()
+                ),
+            )),
+            (_, None) => Ok(reference),
+        }
+    };
+    let iso = shared(&|e| e.iso.map(|v| v as f64), "ISO (PhotographicSensitivity)", REFERENCE_ISO)?;
+    let f_number = shared(&|e| e.f_number, "FNumber (nor ApertureValue)", REFERENCE_F_NUMBER)?;
+    for &i in &from_exif {
+        let e = exifs[i].as_ref().expect("filtered above");
+        images[i].exposure = e.relative_exposure_with(iso, f_number);
+        images[i].exposure_source = Some("EXIF");
+        if e.iso.is_none() {
+            images[i]
+                .exif_notes
+                .push(format!("no ISO in EXIF: taken as {iso}, as the other photos"));
+        }
+        if e.f_number.is_none() {
+            images[i]
+                .exif_notes
+                .push(format!("no f-number in EXIF: taken as f/{f_number}, as the other photos"));
+        }
+    }
+    Ok(())
 }
 
 /// Load a session and check it against its files without decoding pixels: every image exists and
@@ -182,6 +245,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
         None => (None, None),
     };
     let mut images = Vec::new();
+    let mut exifs = Vec::new();
     for im in &s.images {
         let p = Session::resolve(&file, &im.file);
         let reader = image::ImageReader::open(&p)
@@ -192,18 +256,16 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             path: p.clone(),
             err: e,
         })?;
-        let (width, height) = dec.dimensions();
+        let (mut width, mut height) = dec.dimensions();
         crate::photo::check_size(&p, width, height)?;
         let ct = dec.color_type();
         let channels = ct.channel_count();
         let bits = ct.bytes_per_pixel() / channels * 8;
-        let (exposure, exposure_source) = match im.exposure {
-            Some(e) => (Some(e), Some("session.json")),
-            None => match crate::photo::ExifInfo::read(&p)? {
-                Some(x) => (Some(x.relative_exposure()), Some("EXIF")),
-                None => (None, None),
-            },
-        };
+        let exif = crate::photo::ExifInfo::read(&p)?;
+        // Photos are decoded upright (`photo::decode_oriented`): orientations 5–8 swap the sides.
+        if exif.as_ref().and_then(|e| e.orientation).is_some_and(|o| (5..=8).contains(&o)) {
+            std::mem::swap(&mut width, &mut height);
+        }
         if let Some(cam) = &camera {
             if cam.image_size != [width, height] {
                 return Err(Error::invalid(
@@ -222,12 +284,15 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             height,
             bits,
             channels,
-            exposure,
-            exposure_source,
+            exposure: im.exposure,
+            exposure_source: im.exposure.map(|_| "session.json"),
+            exif_notes: exif.as_ref().map(|e| e.notes.clone()).unwrap_or_default(),
             linear: im.linear.unwrap_or(bits > 8),
             radii_mm: im.spheres.iter().map(|s| s.radius_mm).collect(),
         });
+        exifs.push(exif);
     }
+    exif_exposures(&file, &mut images, &exifs)?;
     let known = images.iter().filter(|i| i.exposure.is_some()).count();
     if known != 0 && known != images.len() {
         let missing: Vec<&str> = images
@@ -238,8 +303,17 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
         return Err(Error::invalid(
             &file,
             format!(
-                "exposure unknown for {} (no EXIF, no \"exposure\"): cannot compare with the other images",
-                missing.join(", ")
+                "exposure unknown for {} (no \"exposure\" in session.json and {}): cannot compare with the other images",
+                missing.join(", "),
+                images
+                    .iter()
+                    .zip(&exifs)
+                    .find(|(i, _)| i.exposure.is_none())
+                    .map(|(_, e)| match e {
+                        Some(e) => e.no_exposure.clone().unwrap_or_default(),
+                        None => "no EXIF".into(),
+                    })
+                    .unwrap_or_default()
             ),
         ));
     }

@@ -409,7 +409,7 @@ pub fn exif_checks(
     }
     let mut focals: Vec<String> = with
         .iter()
-        .map(|e| format!("{:.1} mm", e.focal_length_mm))
+        .filter_map(|e| e.focal_length_mm.map(|f| format!("{f:.1} mm")))
         .collect();
     focals.sort();
     focals.dedup();
@@ -419,13 +419,16 @@ pub fn exif_checks(
             focals.join(", ")
         ));
     }
+    let focal = match with.iter().find_map(|e| e.focal_length_mm) {
+        Some(f) => format!("{f:.1} mm"),
+        None => "focal length unknown".into(),
+    };
     match with.iter().find_map(|e| e.focal_length_35mm) {
         Some(f35) => {
             let expected = photo::fx_from_35mm(f35 as f64, size);
             let ratio = fitted_fx / expected;
             let line = format!(
-                "lens: {:.1} mm ({f35} mm equivalent) implies fx ≈ {expected:.0} px; fitted fx = {:.1} px ({:+.1}%)",
-                with[0].focal_length_mm,
+                "lens: {focal} ({f35} mm equivalent) implies fx ≈ {expected:.0} px; fitted fx = {:.1} px ({:+.1}%)",
                 fitted_fx,
                 100.0 * (ratio - 1.0)
             );
@@ -436,8 +439,7 @@ pub fn exif_checks(
             }
         }
         None => notes.push(format!(
-            "lens: {:.1} mm, but no 35 mm equivalent in EXIF: fx not checked against it",
-            with[0].focal_length_mm
+            "lens: {focal}, but no 35 mm equivalent in EXIF: fx not checked against it"
         )),
     }
     notes

@@ -53,7 +53,7 @@ pub struct SessionConfig {
     /// Render with the entry-side Fresnel transmission (off by default, like the model: the bare
     /// clamped cosine, which the paper's procedure assumes).
     pub entry_transmission: bool,
-    /// Relative exposure (see [`crate::photo`]).
+    /// Relative exposure (see [`crate::formats::exif`]).
     pub exposure: f64,
     /// Shot-noise standard deviation at full scale (relative; variance ∝ signal).
     pub noise: f64,
