@@ -6,7 +6,7 @@
 //! spheres, left to right in the order `session.json` lists them → per sphere, edge points,
 //! RANSAC outline and edge-model refinement ([`crate::silhouette`]) → the highlight and its light
 //! ([`crate::highlight`]). Lights are combined per photo and, unless the session says
-//! `"light": "per-image"`, over the whole session ([`crate::highlight::combine`]).
+//! `"light": "per-image"`, over the whole session ([`crate::highlight::combine_highlights`]).
 //! Photos are processed in parallel (rayon); detection uses no OpenCV.
 
 use crate::error::{Error, Result};
@@ -468,12 +468,14 @@ pub fn run(opts: &Options) -> Result<Detections> {
         })
         .collect();
     // Lights: per photo, then over the session.
-    let est = |f: &Found| f.highlight.as_ref().ok().map(|h| (h.light, h.cov));
+    fn est(f: &Found) -> Option<&highlight::Highlight> {
+        f.highlight.as_ref().ok()
+    }
     let image_lights: Vec<Option<highlight::Combined>> = per_image
         .iter()
         .map(|(_, fs)| {
             let e: Vec<_> = fs.iter().filter_map(est).collect();
-            highlight::combine(&e, LIGHT_FLOOR)
+            highlight::combine_highlights(&e, LIGHT_FLOOR)
         })
         .collect();
     let all: Vec<(usize, usize)> = per_image
@@ -492,7 +494,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
                 .iter()
                 .filter_map(|&(i, j)| est(&per_image[i].1[j]))
                 .collect();
-            highlight::combine(&e, LIGHT_FLOOR)
+            highlight::combine_highlights(&e, LIGHT_FLOOR)
         }
         LightMode::PerImage => None,
     };

@@ -4,15 +4,17 @@
 //! l = 2(n·v)n − v with that pixel's own normal and view vector (perspective: v differs per pixel).
 //! Locating the peak as the brightest pixel or a plain centroid is biased: the diffuse gradient
 //! under the highlight and the off-specular shift of a rough lobe (its 1/(n·v) and masking terms)
-//! pull it toward the light. So, where the highlight is not clipped, workbench fits the light
-//! itself: the pixels around the peak are modelled as a smooth diffuse trend (a cubic in the
-//! image) plus A · fs(n, v, l; α) · (n·l), the GGX lobe of [`crate::specular`] with the pixel's
-//! own geometry, and Levenberg–Marquardt moves l (two angles) and α while the trend and A are
-//! solved in closed form (variable projection). Saturated pixels are left out of the fit. A lobe
-//! narrower than a few pixels (α·R < 4 px) is not resolved by the pixels, and a clipped one has
-//! too little left around its clipped core: those are located by the intensity-weighted centroid
-//! of their excess over a local plane (fitted on a ring around them) — sub-pixel even for a blob
-//! of a few clipped pixels.
+//! pull it toward the light. So workbench fits the light itself: the pixels around the peak are
+//! modelled as a smooth diffuse trend plus A · fs(n, v, l; α) · (n·l), the GGX lobe of
+//! [`crate::specular`] with the pixel's own geometry, and Levenberg–Marquardt moves l (two angles)
+//! and α while the trend and A are solved in closed form (variable projection). Clipped pixels are
+//! censored observations ("at least this bright"): they cost nothing while the model is above
+//! them. The trend is fitted in two forms (`Trend`); their disagreement, and the shift when the
+//! clipped pixels are left out, are errors of the model that enter the light's covariance. A lobe
+//! narrower than a few pixels (α·R < 4 px) is not resolved by the pixels: it, and a small clipped
+//! core the lobe cannot be fitted to, are located by the intensity-weighted centroid of their
+//! excess over a local plane (fitted on a ring around them) — sub-pixel even for a blob of a few
+//! clipped pixels. docs/commands.md ("detect") has the rules.
 //!
 //! Each estimate carries a covariance of the two light angles: from the fit's Jacobian (σ²(JᵀJ)⁻¹)
 //! or, for a centroid, from a quarter-pixel position error mapped through the reflection.
@@ -30,6 +32,14 @@ const ETA: f64 = 1.5;
 
 /// A lobe is resolved when α times the sphere's image radius reaches this many pixels.
 const RESOLVED_PX: f64 = 4.0;
+
+/// Largest clipped share of the disc that can still hold a highlight: beyond it the clipping is
+/// diffuse shading.
+const MAX_CLIPPED: f64 = 0.5;
+
+/// Largest clipped share of the disc located by the centroid of its clipped core when the lobe
+/// fit fails.
+const CENTROID_CLIPPED: f64 = 0.02;
 
 /// Roughest lobe the fit accepts (GGX α); broader ones blend into the diffuse shading.
 const MAX_ALPHA: f64 = 0.25;
@@ -61,6 +71,9 @@ pub struct Highlight {
     pub saturated: usize,
     /// Angular radius of the highlight region on the sphere (normals within it are flagged).
     pub radius: f64,
+    /// Half the angle between the lights fitted with the two kinds of diffuse trend (radians;
+    /// 0 for a centroid): an error every sphere of a session shares, included in `cov`.
+    pub trend_spread: f64,
 }
 
 impl Highlight {
@@ -79,6 +92,8 @@ struct Px {
     n: Vector3<f64>,
     v: Vector3<f64>,
     value: f64,
+    /// Clipped: the true value is at least `value` (a censored observation).
+    clipped: bool,
 }
 
 /// The lobe's shape at a pixel for light l and roughness α (ks = 1): fs · (n·l).
@@ -86,7 +101,7 @@ fn shape(p: &Px, l: &Vector3<f64>, alpha: f64) -> f64 {
     specular::lobe(p.n.dot(l), p.n.dot(&p.v), l.dot(&p.v), 1.0, alpha, ETA).value
 }
 
-/// Linear terms: a cubic diffuse trend (10) and the lobe amplitude.
+/// Linear terms: the diffuse trend (10, either kind of [`Trend`]) and the lobe amplitude.
 const NLIN: usize = 11;
 
 struct Fit {
@@ -97,6 +112,17 @@ struct Fit {
     e2: Vector3<f64>,
     center: Vector2<f64>,
     scale: f64,
+    trend: Trend,
+}
+
+/// The smooth diffuse shading under the lobe, solved linearly beside the lobe's amplitude.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Trend {
+    /// A cubic in the image coordinates.
+    Image,
+    /// A quartic in n·l, and the same times n·v: any shading of a sphere under a directional
+    /// light that depends on the two angles.
+    Shading,
 }
 
 impl Fit {
@@ -117,6 +143,16 @@ impl Fit {
         let rows: Vec<SVector<f64, NLIN>> = pix
             .iter()
             .map(|p| {
+                if self.trend == Trend::Shading {
+                    let (cl, cv) = (p.n.dot(&l), p.n.dot(&p.v));
+                    let mut a = SVector::<f64, NLIN>::zeros();
+                    for i in 0..5 {
+                        a[2 * i] = cl.powi(i as i32);
+                        a[2 * i + 1] = cl.powi(i as i32) * cv;
+                    }
+                    a[NLIN - 1] = shape(p, &l, alpha);
+                    return a;
+                }
                 let d = (p.px - self.center) / self.scale;
                 let (x, y) = (d.x, d.y);
                 SVector::<f64, NLIN>::from([
@@ -134,14 +170,41 @@ impl Fit {
                 ])
             })
             .collect();
-        for (a, p) in rows.iter().zip(pix) {
-            ata += a * a.transpose();
-            atb += a * p.value;
+        // Censored fit: a clipped pixel says only "at least this bright", so it enters the linear
+        // solve, at its clipped value, only while the model predicts less (an active set, a few
+        // rounds), and its residual is zero once the model reaches it.
+        let mut active = vec![false; pix.len()];
+        let mut c = SVector::<f64, NLIN>::zeros();
+        for _round in 0..6 {
+            ata.fill(0.0);
+            atb.fill(0.0);
+            for ((a, p), &on) in rows.iter().zip(pix).zip(&active) {
+                if !p.clipped || on {
+                    ata += a * a.transpose();
+                    atb += a * p.value;
+                }
+            }
+            c = ata.try_inverse()? * atb;
+            let next: Vec<bool> = rows
+                .iter()
+                .zip(pix)
+                .map(|(a, p)| p.clipped && a.dot(&c) < p.value)
+                .collect();
+            if next == active {
+                break;
+            }
+            active = next;
         }
-        let c = ata.try_inverse()? * atb;
         let r = DVector::from_iterator(
             pix.len(),
-            rows.iter().zip(pix).map(|(a, p)| p.value - a.dot(&c)),
+            rows.iter().zip(pix).map(|(a, p)| {
+                let e = p.value - a.dot(&c);
+                if p.clipped {
+                    e.max(0.0)
+                } else {
+                    e
+                }
+            }),
         );
         Some((r, c))
     }
@@ -318,13 +381,14 @@ pub fn find(
     } else {
         None
     };
-    // A clipped region this large is clipped diffuse shading, not a highlight.
+    // More than half the disc clipped is clipped diffuse shading, not a highlight.
     let clipped = sat_mask.iter().filter(|&&m| m).count();
     let disc = std::f64::consts::PI * r_px * r_px;
-    if clipped as f64 > 0.02 * disc {
+    let clipped_frac = clipped as f64 / disc;
+    if clipped_frac > MAX_CLIPPED {
         return Err(NoHighlight(format!(
             "{clipped} px ({:.0}% of the sphere) clipped: lower the exposure",
-            100.0 * clipped as f64 / disc
+            100.0 * clipped_frac
         )));
     }
     let start_px = match &sat_blob {
@@ -406,6 +470,7 @@ pub fn find(
                 alpha: None,
                 saturated: clipped,
                 radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
+                trend_spread: 0.0,
             })
         };
     // Lobe fit in two passes: a 30° patch of half-vector angles tried from three roughnesses
@@ -414,6 +479,11 @@ pub fn find(
     let mut l0 = l_start;
     let mut theta_max = 30f64.to_radians();
     let mut starts = vec![0.03, 0.08, 0.2];
+    let mut last = None;
+    // Angular radius (normal angle) of the clipped core around the highlight.
+    let core_angle = sat_blob
+        .as_ref()
+        .map_or(0.0, |b| ((b.area as f64 / std::f64::consts::PI).sqrt() / r_px).min(1.0).asin());
     for _pass in 0..2 {
         let mut pix = vec![];
         for j in 0..bh {
@@ -421,9 +491,6 @@ pub fn find(
                 let Some((n, v)) = surf[j * bw + i] else {
                     continue;
                 };
-                if sat_mask[j * bw + i] {
-                    continue;
-                }
                 let h = (l0 + v).normalize();
                 if n.dot(&h).min(1.0).acos() < theta_max {
                     let px = Vector2::new((bx0 as usize + i) as f64, (by0 as usize + j) as f64);
@@ -432,11 +499,14 @@ pub fn find(
                         n,
                         v,
                         value: lum.at(px.x as u32, px.y as u32) as f64,
+                        clipped: sat_mask[j * bw + i],
                     });
                 }
             }
         }
-        if pix.len() < 20 {
+        let unclipped = pix.iter().filter(|p| !p.clipped).count();
+        if unclipped < 20 {
+            result = None;
             break;
         }
         let (e1, e2) = tangent_basis(&l0);
@@ -447,6 +517,7 @@ pub fn find(
             e2,
             center: start_px,
             scale: theta_max.sin() * r_px,
+            trend: Trend::Image,
         };
         let best = starts
             .iter()
@@ -459,17 +530,46 @@ pub fn find(
         };
         let l = fit.light(&x);
         let alpha = x.z.exp();
-        let dof = pix.len().saturating_sub(NLIN + 3).max(1) as f64;
+        let dof = unclipped.saturating_sub(NLIN + 3).max(1) as f64;
         let sigma2 = r.norm_squared() / dof;
         let amp = c[NLIN - 1] * pix.iter().map(|p| shape(p, &l, alpha)).fold(0.0, f64::max);
         let trend_at_peak = c[0];
-        result = Some((l, alpha, sigma2, amp, trend_at_peak, j, e1, e2, pix.len()));
+        result = Some((l, alpha, sigma2, amp, trend_at_peak, j, e1, e2, unclipped));
+        last = Some((fit, pix, x));
         l0 = l;
         starts = vec![alpha];
+        // At least twice the clipped core's angular radius: its ring is what locates the lobe.
         theta_max = (3.0 * alpha)
             .atan()
+            .max(2.0 * core_angle + 4f64.to_radians())
             .clamp(6f64.to_radians(), 45f64.to_radians());
     }
+    // The lobe against the other kind of diffuse trend, on the last pass's pixels: how far the
+    // two lights lie apart is an error of the trend model that σ²(JᵀJ)⁻¹ does not see (a broad
+    // lobe trades with the shading under it). The light is their midpoint, and half their
+    // distance enters its covariance, isotropic in the tangent plane.
+    let shading_light = last.as_ref().and_then(|(fit, pix, x)| {
+        let f2 = Fit {
+            trend: Trend::Shading,
+            ..*fit
+        };
+        let (x2, _, c2, _) = solve(&f2, pix, *x)?;
+        (c2[NLIN - 1] > 0.0).then(|| f2.light(&x2))
+    });
+    // And with the clipped pixels left out rather than censored: how much the clipped core's
+    // treatment matters.
+    let uncensored_light = last.as_ref().and_then(|(fit, pix, x)| {
+        if !pix.iter().any(|p| p.clipped) {
+            return None;
+        }
+        let kept: Vec<Px> = pix
+            .iter()
+            .filter(|p| !p.clipped)
+            .map(|p| Px { ..*p })
+            .collect();
+        let (x2, _, c2, _) = solve(fit, &kept, *x)?;
+        (c2[NLIN - 1] > 0.0).then(|| fit.light(&x2))
+    });
     let fitted = result.and_then(|(l, alpha, sigma2, amp, trend, j, b1, b2, npix)| {
         let significant = amp > 6.0 * sigma2.sqrt().max(noise) && amp > 0.02 * trend.abs();
         let plausible = alpha > 1.5e-3 && alpha < MAX_ALPHA && npix >= 20;
@@ -480,16 +580,28 @@ pub fn find(
         // The angles are steps along the last pass's basis (b1, b2) at its start direction.
         let e = Matrix3x2::from_columns(&[b1, b2]);
         let c2 = Matrix2::new(cov3[(0, 0)], cov3[(0, 1)], cov3[(1, 0)], cov3[(1, 1)]);
+        let (l, spread) = match shading_light {
+            Some(l2) if l2.angle(&l) < 0.35 => {
+                let mid = (l + l2).normalize();
+                let censoring = uncensored_light.map_or(0.0, |l3| l3.angle(&l));
+                (mid, (0.5 * l2.angle(&l)).max(censoring))
+            }
+            // The other trend found no lobe, or one far away: the trend decides, so the light is
+            // not measured by this highlight.
+            _ => return None,
+        };
         let q = outline.mirror_point(&l)?;
         let px = proj.pixel(&q)?;
+        let tangent = Matrix3::identity() - l * l.transpose();
         Some(Highlight {
             px,
             light: l,
-            cov: e * c2 * e.transpose(),
+            cov: e * c2 * e.transpose() + tangent * spread * spread,
             method: Method::LobeFit,
             alpha: Some(alpha),
             saturated: sat_blob.as_ref().map_or(0, |b| b.area),
             radius: (3.0 * alpha).atan().max(2f64.to_radians()),
+            trend_spread: spread,
         })
     });
     // A clipped highlight whose lobe spans only a few pixels is located better by the centroid
@@ -504,14 +616,20 @@ pub fn find(
         )
     };
     match (fitted, &sat_blob) {
-        (Some(h), Some(b)) if !resolved(&h) => blob_centroid(b),
+        (Some(h), Some(b)) if !resolved(&h) && clipped_frac <= CENTROID_CLIPPED => blob_centroid(b),
         (Some(h), None) if !resolved(&h) => centroid(
             h.px,
             (3.0 * h.alpha.unwrap_or(0.0) * r_px).max(2.0) + 1.0,
             0,
         ),
         (Some(h), _) => Ok(h),
-        (None, Some(b)) => blob_centroid(b),
+        // The centroid of a large clipped core is pulled by the diffuse shading under it: only a
+        // small one is located that way.
+        (None, Some(b)) if clipped_frac <= CENTROID_CLIPPED => blob_centroid(b),
+        (None, Some(_)) => Err(NoHighlight(format!(
+            "{clipped} px ({:.0}% of the sphere) clipped, and the unclipped ring around them does not determine the lobe (no significant, plausible fit): lower the exposure",
+            100.0 * clipped_frac
+        ))),
         (None, None) => Err(NoHighlight(format!(
             "no significant specular peak (largest local excess {excess:.3e}, noise {noise:.1e})"
         ))),
@@ -531,6 +649,24 @@ impl Combined {
     pub fn std(&self) -> f64 {
         self.cov.symmetric_eigenvalues().max().max(0.0).sqrt()
     }
+}
+
+/// Combine highlights' lights ([`combine`]); the trend-model error, shared by every sphere and so
+/// not averaged down, is added back: the median `trend_spread` of the estimates kept, isotropic in
+/// the tangent plane.
+pub fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combined> {
+    let est: Vec<_> = hs.iter().map(|h| (h.light, h.cov)).collect();
+    let mut c = combine(&est, floor)?;
+    let kept: Vec<f64> = hs
+        .iter()
+        .zip(&c.outlier)
+        .filter(|(_, &o)| !o)
+        .map(|(h, _)| h.trend_spread)
+        .collect();
+    let s = crate::stats::percentile(kept, 0.5);
+    let s = if s.is_finite() { s } else { 0.0 };
+    c.cov += (Matrix3::identity() - c.light * c.light.transpose()) * s * s;
+    Some(c)
 }
 
 /// Combine light estimates: IRLS with Huber weights on the Mahalanobis distance (each covariance

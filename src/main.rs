@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use workbench::camera::{Camera, Distortion};
 use workbench::model::{LightAngles, Material, SpecularParams};
 use workbench::synth::checkerboard::{self, BoardFormat, CheckerConfig};
-use workbench::synth::session::{self, Format, Layout, SessionConfig};
+use workbench::synth::session::{self, Backdrop, Format, Layout, SessionConfig};
 use workbench::synth::volpath;
 
 #[derive(Parser)]
@@ -516,6 +516,13 @@ enum LayoutArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum BackdropArg {
+    Black,
+    Grey,
+    Table,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum FormatArg {
     Png16,
     Jpeg,
@@ -532,6 +539,10 @@ struct SessionArgs {
     /// One photo per sphere, or all spheres in one photo.
     #[arg(long, value_enum, default_value = "separate")]
     layout: LayoutArg,
+    /// Behind the spheres: a black void, a grey card (8–22% of full scale, a gradient), or a lit
+    /// matte table the spheres rest on, with their shadows, before a grey wall.
+    #[arg(long, value_enum, default_value = "black")]
+    backdrop: BackdropArg,
     #[command(flatten)]
     camera: CameraArgs,
     #[command(flatten)]
@@ -687,6 +698,11 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
         layout: match a.layout {
             LayoutArg::Separate => Layout::Separate,
             LayoutArg::Row => Layout::Row,
+        },
+        backdrop: match a.backdrop {
+            BackdropArg::Black => Backdrop::Black,
+            BackdropArg::Grey => Backdrop::Grey,
+            BackdropArg::Table => Backdrop::Table,
         },
         camera: a.camera.camera()?,
         light: a.light.angles(),

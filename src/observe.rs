@@ -150,6 +150,23 @@ pub struct Observed {
     pub floors: Vec<Option<[f64; 3]>>,
 }
 
+/// One light per photo (`"light": "per-image"`): the rotation of each photo that takes its light
+/// onto `reference`. The model sees a sphere only through n·l, n·v and l·v, so photos turned this
+/// way share one light and the joint fit needs no other change: the material is shared, and the
+/// fitted light is the reference's, each photo's being the rotation's inverse applied to it.
+pub fn light_frames(
+    lights: &[Vector3<f64>],
+    reference: &Vector3<f64>,
+) -> Vec<nalgebra::Rotation3<f64>> {
+    lights
+        .iter()
+        .map(|l| {
+            nalgebra::Rotation3::rotation_between(l, reference)
+                .unwrap_or_else(nalgebra::Rotation3::identity)
+        })
+        .collect()
+}
+
 /// The dark-room floor per channel: the median of the pixels outside every sphere (their pixel
 /// boxes grown by a quarter), sampled on a grid of at most ~200 000 points; `None` when fewer
 /// than 1000 such pixels remain (spheres filling the frame).
@@ -259,14 +276,17 @@ pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
 }
 
 /// Decode the session's photos and collect the observations of every sphere of `det`, with
-/// θ and the highlight flag from `light` (and the highlight radius `highlight_radius`).
+/// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
+/// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
+/// vectors are turned by its rotation (see [`light_frames`]).
 pub fn observe(
     report: &SessionReport,
     sess: &Session,
     det: &Detections,
     proj: &Projection,
-    light: Option<&Vector3<f64>>,
+    lights: &[Option<Vector3<f64>>],
     highlight_radius: Option<f64>,
+    frame: Option<&[nalgebra::Rotation3<f64>]>,
 ) -> Result<Observed> {
     let t0 = Instant::now();
     let images: Vec<_> = report
@@ -321,9 +341,10 @@ pub fn observe(
                 proj,
                 &s.outline.outline(),
                 s.radius_mm,
-                light,
+                lights.get(i).or(lights.first()).and_then(|l| l.as_ref()),
                 highlight_radius,
             );
+            let turn = frame.map(|f| f[i]);
             let floor_rgb = floors[i].unwrap_or([0.0; 3]);
             let mut smp = smp;
             for x in smp.iter_mut() {
@@ -394,10 +415,14 @@ pub fn observe(
                     out.saturated += 1;
                     continue;
                 }
+                let (normal, view) = match &turn {
+                    Some(r) => (r * x.normal, r * x.view),
+                    None => (x.normal, x.view),
+                };
                 out.obs.push(Obs {
                     geometry: Geometry {
-                        normal: x.normal,
-                        view: x.view,
+                        normal,
+                        view,
                         radius_mm: s.radius_mm,
                     },
                     radiance: x.radiance,

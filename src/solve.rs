@@ -409,6 +409,9 @@ pub struct FitFile {
     pub light_direction: [f64; 3],
     pub light_azimuth_deg: f64,
     pub light_elevation_deg: f64,
+    /// Under `"light": "per-image"`: each photo's fitted light (`light_direction` is the first's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub image_lights: Vec<ImageLightJson>,
     /// The extensions' values when on (see `model`), with the reference radius.
     pub sigma_exponent: Option<f64>,
     pub albedo_curvature: Option<f64>,
@@ -591,6 +594,15 @@ impl FitFile {
     }
 }
 
+/// One photo's light under `"light": "per-image"`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImageLightJson {
+    pub file: String,
+    pub direction: [f64; 3],
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+}
+
 /// Everything loaded before fitting.
 pub struct Loaded {
     pub report: SessionReport,
@@ -601,6 +613,8 @@ pub struct Loaded {
     pub light: Option<Vector3<f64>>,
     /// The detector's standard error of the light (radians).
     pub light_std: Option<f64>,
+    /// Under `"light": "per-image"`: each photo's rotation onto the common light frame.
+    pub frames: Option<Vec<nalgebra::Rotation3<f64>>>,
     pub highlight_radius: Option<f64>,
     pub alpha: Option<f64>,
     pub skipped: Vec<String>,
@@ -668,12 +682,6 @@ pub fn load(opts: &Options) -> Result<Loaded> {
 /// [`load`] for a session already inspected (at `t0`).
 fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<Loaded> {
     let (sess, _) = Session::load(&report.session_file)?;
-    if sess.light == LightMode::PerImage {
-        return Err(Error::invalid(
-            &report.session_file,
-            "\"light\": \"per-image\": solve fits one light for the whole session",
-        ));
-    }
     let mut timings = Timings {
         inspect_s: t0.elapsed().as_secs_f64(),
         ..Timings::default()
@@ -720,8 +728,40 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
         }
     };
     timings.detect_s = t1.elapsed().as_secs_f64();
-    let light = detections.light_direction.map(Vector3::from);
-    let light_std = detections.light_std_deg.map(f64::to_radians);
+    // One light per photo: each photo is turned so that its light (from its own highlights)
+    // lies on the first photo's, the material is fitted in that common frame, and the light's
+    // prior is the photos' lights combined (`observe::light_frames`).
+    let (light, light_std, frames) = match sess.light {
+        LightMode::Shared => (
+            detections.light_direction.map(Vector3::from),
+            detections.light_std_deg.map(f64::to_radians),
+            None,
+        ),
+        LightMode::PerImage => {
+            let mut lights = vec![];
+            let mut info = 0.0;
+            for im in &detections.images {
+                let (Some(l), Some(sd)) = (im.light_direction, im.light_std_deg) else {
+                    return Err(Error::invalid(
+                        &report.session_file,
+                        format!(
+                            "\"light\": \"per-image\", but {} has no usable highlight: its light is unknown (detections.json says why)",
+                            im.file
+                        ),
+                    ));
+                };
+                lights.push(Vector3::from(l));
+                info += 1.0 / sd.to_radians().max(detect::LIGHT_FLOOR).powi(2);
+            }
+            let reference = lights[0];
+            let frames = observe::light_frames(&lights, &reference);
+            skipped.push(format!(
+                "light: one per photo ({} photos), each turned onto the first photo's light; the fit refines a correction they share",
+                lights.len()
+            ));
+            (Some(reference), Some(info.powf(-0.5)), Some(frames))
+        }
+    };
     let hl: Vec<&detect::HighlightJson> = detections
         .images
         .iter()
@@ -741,8 +781,16 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
         &sess,
         &detections,
         &proj,
-        light.as_ref(),
+        &match sess.light {
+            LightMode::Shared => vec![light],
+            LightMode::PerImage => detections
+                .images
+                .iter()
+                .map(|i| i.light_direction.map(Vector3::from))
+                .collect(),
+        },
         highlight_radius,
+        frames.as_deref(),
     )?;
     timings.decode_s = obs.decode_s;
     timings.samples_s = obs.samples_s;
@@ -760,6 +808,7 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
         spheres: obs.spheres,
         light,
         light_std,
+        frames,
         highlight_radius,
         alpha,
         skipped,
@@ -1333,6 +1382,22 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         light_direction: [l_dir.x, l_dir.y, l_dir.z],
         light_azimuth_deg: p.light.azimuth.to_degrees(),
         light_elevation_deg: p.light.elevation.to_degrees(),
+        image_lights: l
+            .frames
+            .iter()
+            .flatten()
+            .zip(&l.report.images)
+            .map(|(r, im)| {
+                let d = r.inverse() * l_dir;
+                let a = LightAngles::from_direction(&d);
+                ImageLightJson {
+                    file: im.file.clone(),
+                    direction: [d.x, d.y, d.z],
+                    azimuth_deg: a.azimuth.to_degrees(),
+                    elevation_deg: a.elevation.to_degrees(),
+                }
+            })
+            .collect(),
         sigma_exponent: outcome
             .extensions
             .sigma_exponent
@@ -1511,6 +1576,18 @@ pub fn summary(f: &FitFile) -> String {
             s,
             "         moved {:.3}° from the detector's light (± {:.4}°): pull {:.1}",
             lp.moved_deg, lp.detector_std_deg, lp.pull
+        );
+    }
+    for il in &f.image_lights {
+        let _ = writeln!(
+            s,
+            "light    {:<12} [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°)",
+            il.file,
+            il.direction[0],
+            il.direction[1],
+            il.direction[2],
+            il.azimuth_deg,
+            il.elevation_deg
         );
     }
     if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {

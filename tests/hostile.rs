@@ -1,7 +1,7 @@
-//! Hostile input through the binary: broken and cut image files, broken EXIF, empty and unrelated
-//! folders, images too large or too small, bad session.json values, paths leaving the session
-//! folder, a symlink loop. Each must give one line on stderr naming the file at fault, a non-zero
-//! exit, no panic, and no fit.json or detections.json.
+//! Hostile input through the binary: broken and cut image files, broken EXIF (loaded with a
+//! note), empty and unrelated folders, images too large or too small, bad session.json values,
+//! paths leaving the session folder, a symlink loop. Each must give one line on stderr naming the
+//! file at fault, a non-zero exit, no panic, and no fit.json or detections.json.
 
 mod common;
 use std::path::{Path, PathBuf};
@@ -113,8 +113,14 @@ fn broken_image_files() {
         .expect("the synthetic JPEG carries EXIF");
     bytes[at + 6..at + 46].fill(0xFF);
     std::fs::write(&p, &bytes).unwrap();
-    let e = refused("solve", &d, "r20.jpg");
-    assert!(e.contains("EXIF"), "{e}");
+    // A photo whose EXIF block does not parse loads without its settings, and says so.
+    let (code, out, err) = common::wb(&["check", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("exif") && l.contains("r20.jpg") && l.contains("unreadable")),
+        "{out}"
+    );
     // A TIFF cut short.
     let d = session_in(tmp.path(), "cut-tiff", Format::Png16);
     let png = photo(&d);

@@ -556,3 +556,74 @@ fn an_unchanged_rerun_reuses_fit_json() {
     });
     assert!(!again.skipped.iter().any(|s| s.starts_with("solve:")));
 }
+
+/// `"light": "per-image"`: three spheres, each photographed under its own light, recover σ0 as
+/// well as the same three under one light, and each photo's light is its own.
+#[test]
+fn one_light_per_photo() {
+    use workbench::model::LightAngles;
+    let radii = [35.0, 25.0, 15.0];
+    let lights = [(70.0, 20.0), (-40.0, 35.0), (20.0, 50.0)];
+    let angles = |(az, el): (f64, f64)| LightAngles {
+        azimuth: f64::to_radians(az),
+        elevation: f64::to_radians(el),
+    };
+    let base = SessionConfig {
+        radii_mm: radii.to_vec(),
+        noise: 0.005,
+        ..SessionConfig::default()
+    };
+    let shared = make(base.clone());
+    let f_shared = solve_with(shared.path(), "fit.json", |o| o.jackknife = false);
+    let t = truth(shared.path());
+    // The per-image session: each radius rendered alone under its light, then put together.
+    let per = tempfile::tempdir().unwrap();
+    let mut images = vec![];
+    for (k, (&r, &l)) in radii.iter().zip(&lights).enumerate() {
+        let one = make(SessionConfig {
+            radii_mm: vec![r],
+            light: angles(l),
+            seed: 10 + k as u64,
+            ..base.clone()
+        });
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(one.path().join("session.json")).unwrap())
+                .unwrap();
+        let file = s["images"][0]["file"].as_str().unwrap().to_string();
+        std::fs::copy(one.path().join(&file), per.path().join(&file)).unwrap();
+        std::fs::copy(
+            one.path().join("intrinsics.json"),
+            per.path().join("intrinsics.json"),
+        )
+        .unwrap();
+        images.push(s["images"][0].clone());
+    }
+    let sess = serde_json::json!({
+        "schema": "workbench.session/1",
+        "intrinsics": "intrinsics.json",
+        "light": "per-image",
+        "images": images,
+    });
+    std::fs::write(
+        per.path().join("session.json"),
+        serde_json::to_string_pretty(&sess).unwrap(),
+    )
+    .unwrap();
+    let f_per = solve_with(per.path(), "fit.json", |o| o.jackknife = false);
+    let e_shared = worst(&f_shared.sigma0_mm, &t.sigma0_mm);
+    let e_per = worst(&f_per.sigma0_mm, &t.sigma0_mm);
+    println!(
+        "σ0 worst relative error: shared light {:.3}%, one light per photo {:.3}%",
+        100.0 * e_shared,
+        100.0 * e_per
+    );
+    assert_eq!(f_per.image_lights.len(), 3);
+    for (il, &l) in f_per.image_lights.iter().zip(&lights) {
+        let dl = Vector3::from(il.direction)
+            .angle(&angles(l).direction())
+            .to_degrees();
+        println!("{}: light {dl:.4}° from its truth", il.file);
+        assert!(dl < 0.1, "{}: {dl}°", il.file);
+    }
+    assert!(e_per < 2.0 * e_shared.max(0.002), "{e_per} vs {e_shared}");
+}

@@ -40,6 +40,25 @@ pub enum Format {
     Jpeg,
 }
 
+/// What lies behind and under the spheres.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backdrop {
+    /// A black void (only the ambient floor).
+    #[default]
+    Black,
+    /// A grey card behind the spheres: 8% of full scale at the top-left corner rising to 22% at
+    /// the bottom-right (a gentle gradient; the session's noise on top).
+    Grey,
+    /// The spheres rest on a lit matte table (albedo 0.3, in the photos' radiance units) with
+    /// their cast shadows, in front of a grey wall at 10% of full scale.
+    Table,
+}
+
+/// The table's diffuse albedo (π·radiance / irradiance) and the wall's level behind it.
+pub const TABLE_ALBEDO: f64 = 0.3;
+pub const WALL_LEVEL: f64 = 0.10;
+
 /// Everything that defines a synthetic session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SessionConfig {
@@ -61,6 +80,9 @@ pub struct SessionConfig {
     pub read_noise: f64,
     /// Constant stray-light floor added to every pixel (relative to full scale).
     pub ambient: f64,
+    /// What lies behind and under the spheres.
+    #[serde(default)]
+    pub backdrop: Backdrop,
     /// Edge supersampling: n×n samples per silhouette pixel.
     pub supersample: u32,
     pub format: Format,
@@ -123,6 +145,7 @@ impl Default for SessionConfig {
             noise: 0.01,
             read_noise: 5e-4,
             ambient: 2e-3,
+            backdrop: Backdrop::Black,
             supersample: 4,
             format: Format::Png16,
             jpeg_quality: 95,
@@ -190,6 +213,8 @@ pub struct RenderTruth {
     pub format: Format,
     pub seed: u64,
     pub layout: Layout,
+    #[serde(default)]
+    pub backdrop: Backdrop,
 }
 
 /// One image of the session: its file name and spheres (left to right).
@@ -311,6 +336,17 @@ pub fn plan(cfg: &SessionConfig) -> Result<Vec<ScenePlan>> {
                 }]
             }
         };
+        let mut plans = plans;
+        if cfg.backdrop == Backdrop::Table {
+            // Every sphere rests on the table, which stays put between photos: its plane lies
+            // under the largest sphere's place.
+            for p in plans.iter_mut() {
+                let table_y = p.spheres[0].1.center.y + r_max;
+                for (r, s) in p.spheres.iter_mut() {
+                    *s = Sphere::new(Vector3::new(s.center.x, table_y - *r, s.center.z), *r);
+                }
+            }
+        }
         let all_fit = plans.iter().all(|p| fits_in_frame(cam, &p.spheres, 6.0));
         if all_fit {
             return Ok(plans);
@@ -373,7 +409,7 @@ fn shade(
         }
     }
     let Some((_, i)) = best else {
-        return [cfg.ambient; 3];
+        return backdrop(cfg, spheres, d);
     };
     let (r, s) = &spheres[i];
     let Some(sp) = s.surface_at(d) else {
@@ -386,6 +422,48 @@ fn shade(
     };
     let l = model.radiance(params, &g);
     [0, 1, 2].map(|c| cfg.exposure * l[c] + cfg.ambient)
+}
+
+/// Where a ray `d` from the camera hits nothing but the backdrop: its pixel value (plus ambient).
+fn backdrop(cfg: &SessionConfig, spheres: &[(f64, Sphere)], d: &Vector3<f64>) -> [f64; 3] {
+    let cam = &cfg.camera;
+    match cfg.backdrop {
+        Backdrop::Black => [cfg.ambient; 3],
+        Backdrop::Grey => {
+            // The gradient over the (pinhole) image position of the ray.
+            let u = ((cam.fx * d.x / d.z + cam.cx) / cam.width() as f64).clamp(0.0, 1.0);
+            let v = ((cam.fy * d.y / d.z + cam.cy) / cam.height() as f64).clamp(0.0, 1.0);
+            [0.08 + 0.14 * (0.5 * u + 0.5 * v) + cfg.ambient; 3]
+        }
+        Backdrop::Table => {
+            let r_max = spheres.iter().map(|(r, _)| *r).fold(0.0, f64::max);
+            let table_y = spheres
+                .iter()
+                .map(|(r, s)| s.center.y + r)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let far = spheres.iter().map(|(_, s)| s.center.z).fold(0.0, f64::max) + 4.0 * r_max;
+            let wall = [WALL_LEVEL + cfg.ambient; 3];
+            if d.y <= 0.0 {
+                return wall;
+            }
+            let p = d * (table_y / d.y);
+            if p.z > far {
+                return wall;
+            }
+            let l = cfg.light.direction();
+            // Lit from above (l.y < 0: the light direction points up, toward −y), and not in a
+            // sphere's shadow.
+            let lit = (-l.y).max(0.0);
+            let shadowed = spheres.iter().any(|(r, s)| {
+                let oc = p - s.center;
+                let b = oc.dot(&l);
+                let disc = b * b - (oc.norm_squared() - r * r);
+                disc > 0.0 && -b + disc.sqrt() > 0.0
+            });
+            let e = if shadowed { 0.0 } else { lit };
+            [cfg.exposure * TABLE_ALBEDO * e + cfg.ambient; 3]
+        }
+    }
 }
 
 /// Render one image to linear RGB (noise-free), row-major, 3 values a pixel.
@@ -413,6 +491,12 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     let mut img = vec![cfg.ambient; w * h * 3];
     img.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let yf = y as f64;
+        let everywhere = [[0.0, yf, (w - 1) as f64, yf]];
+        let boxes: &[[f64; 4]] = if cfg.backdrop == Backdrop::Black {
+            &boxes
+        } else {
+            &everywhere
+        };
         let spans: Vec<(usize, usize)> = boxes
             .iter()
             .filter(|b| yf >= b[1] && yf <= b[3])
@@ -426,7 +510,6 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
         for x in (0..w).filter(|&x| spans.iter().any(|&(a, b)| x >= a && x <= b)) {
             let px = Vector2::new(x as f64, y as f64);
             let Some(d) = cam.ray_for_pixel(px) else {
-                row[3 * x..3 * x + 3].copy_from_slice(&[cfg.ambient; 3]);
                 continue;
             };
             let near_edge = n > 1
@@ -606,6 +689,7 @@ pub fn generate(
             format: cfg.format,
             seed: cfg.seed,
             layout: cfg.layout,
+            backdrop: cfg.backdrop,
         },
     };
     let session_file = out.join("session.json");
