@@ -195,15 +195,123 @@ pub fn locate_highlights(
         .collect()
 }
 
-/// Background level and noise of a photo: median and 1.4826·MAD of the luminance (sampled).
-fn background(lum: &Plane) -> (f64, f64) {
-    let step = (lum.data.len() / 200_000).max(1);
-    let mut v: Vec<f32> = lum.data.iter().step_by(step).cloned().collect();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let med = v[v.len() / 2] as f64;
-    let mut dev: Vec<f64> = v.iter().map(|&x| (x as f64 - med).abs()).collect();
-    dev.sort_by(|a, b| a.total_cmp(b));
-    (med, 1.4826 * dev[dev.len() / 2])
+/// The backdrop of a photo: a level per band of 16 rows plus a quadratic across the image,
+/// fitted to the medians of 16×16 pixel cells, the cells that stand out of it (spheres, their
+/// shadows) left out in turn; the noise is 1.4826·MAD of the pixels about it (sampled). On a black
+/// void it is the floor's constant; on a grey card it follows the gradient, on a table before a
+/// wall the step between them (a horizontal edge: a band's level), so that a sphere is what differs
+/// from its surroundings, not what is brighter than the photo's median.
+pub struct Backdrop {
+    rows: Vec<f64>,
+    across: [f64; 2],
+    width: f64,
+    pub noise: f64,
+}
+
+const BACKDROP_CELL: u32 = 16;
+
+impl Backdrop {
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        let band = ((y.max(0.0) as u32 / BACKDROP_CELL) as usize).min(self.rows.len() - 1);
+        let u = x / self.width - 0.5;
+        self.rows[band] + self.across[0] * u + self.across[1] * (u * u - 1.0 / 12.0)
+    }
+
+    pub fn of(lum: &Plane) -> Backdrop {
+        const CELL: u32 = BACKDROP_CELL;
+        let (w, h) = (lum.width, lum.height);
+        let (nx, ny) = (w.div_ceil(CELL) as usize, h.div_ceil(CELL) as usize);
+        let mut cells = vec![];
+        for cy in 0..ny as u32 {
+            for cx in 0..nx as u32 {
+                let mut v: Vec<f32> = (cy * CELL..((cy + 1) * CELL).min(h))
+                    .flat_map(|y| (cx * CELL..((cx + 1) * CELL).min(w)).map(move |x| (x, y)))
+                    .map(|(x, y)| lum.at(x, y))
+                    .collect();
+                let k = v.len() / 2;
+                let m = *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
+                let x = ((cx * CELL) as f64 + 0.5 * CELL as f64).min(w as f64 - 1.0);
+                cells.push((x, cy as usize, m));
+            }
+        }
+        let median = |v: Vec<f64>| crate::stats::percentile(v, 0.5);
+        let all = median(cells.iter().map(|c| c.2).collect());
+        let mut b = Backdrop {
+            rows: vec![all; ny],
+            across: [0.0, 0.0],
+            width: w as f64,
+            noise: 0.0,
+        };
+        let mut keep = vec![true; cells.len()];
+        let basis = |x: f64, width: f64| {
+            let u = x / width - 0.5;
+            [u, u * u - 1.0 / 12.0]
+        };
+        for _round in 0..8 {
+            // The level of each band from its kept cells, or from all of them where a sphere
+            // covers most of the band.
+            for band in 0..ny {
+                let of = |only_kept: bool| -> Vec<f64> {
+                    cells
+                        .iter()
+                        .zip(&keep)
+                        .filter(|((_, cb, _), &k)| *cb == band && (k || !only_kept))
+                        .map(|(&(x, _, m), _)| {
+                            let q = basis(x, b.width);
+                            m - b.across[0] * q[0] - b.across[1] * q[1]
+                        })
+                        .collect()
+                };
+                let kept = of(true);
+                b.rows[band] = median(if 4 * kept.len() >= nx {
+                    kept
+                } else {
+                    of(false)
+                });
+            }
+            // The gradient across, from what the bands leave.
+            let mut ata = nalgebra::Matrix2::<f64>::zeros();
+            let mut atb = nalgebra::Vector2::<f64>::zeros();
+            for (&(x, band, m), _) in cells.iter().zip(&keep).filter(|(_, &k)| k) {
+                let q = nalgebra::Vector2::from(basis(x, b.width));
+                ata += q * q.transpose();
+                atb += q * (m - b.rows[band]);
+            }
+            if let Some(inv) = ata.try_inverse() {
+                b.across = (inv * atb).into();
+            }
+            let res: Vec<f64> = cells
+                .iter()
+                .map(|&(x, band, m)| m - b.at(x, (band as u32 * CELL) as f64))
+                .collect();
+            let mad = 1.4826
+                * median(
+                    res.iter()
+                        .zip(&keep)
+                        .filter(|(_, &k)| k)
+                        .map(|(r, _)| r.abs())
+                        .collect(),
+                );
+            // Cells more than 3 MADs (and 1% of full scale) off the surface are not backdrop.
+            let lim = (3.0 * mad).max(0.01);
+            keep = res.iter().map(|r| r.abs() <= lim).collect();
+        }
+        // Pixel noise about the surface, from pixels of the cells kept.
+        let step = (lum.data.len() / 200_000).max(1);
+        let mut dev: Vec<f64> = (0..lum.data.len())
+            .step_by(step)
+            .filter_map(|i| {
+                let (x, y) = (i as u32 % w, i as u32 / w);
+                let cell = (y / CELL) as usize * nx + (x / CELL) as usize;
+                keep[cell].then(|| (lum.data[i] as f64 - b.at(x as f64, y as f64)).abs())
+            })
+            .collect();
+        if dev.is_empty() {
+            dev.push(0.0);
+        }
+        b.noise = 1.4826 * median(dev);
+        b
+    }
 }
 
 /// Luminance plane of a linear photo.
@@ -225,31 +333,74 @@ pub fn find_spheres(
     img: &LinearRgb,
     lum: &Plane,
     proj: &Projection,
-    radii: &[f64],
+    spheres: &[crate::session::SessionSphere],
     path: &Path,
 ) -> Result<Vec<Silhouette>> {
-    let (bg, noise) = background(lum);
-    let mut top: Vec<f32> = lum
+    let radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    let hints: Option<Vec<([f64; 2], f64)>> = spheres.iter().map(|s| s.hint()).collect();
+    let backdrop = Backdrop::of(lum);
+    let noise = backdrop.noise;
+    let w = lum.width as usize;
+    // Each pixel's excess over the backdrop under it.
+    let excess: Vec<f32> = lum
         .data
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| (v as f64 - backdrop.at((i % w) as f64, (i / w) as f64)).max(0.0) as f32)
+        .collect();
+    let mut top: Vec<f32> = excess
         .iter()
         .step_by((lum.data.len() / 200_000).max(1))
         .cloned()
         .collect();
     top.sort_by(|a, b| a.total_cmp(b));
     let p999 = top[((top.len() as f64 * 0.999) as usize).min(top.len() - 1)] as f64;
-    let thr = bg + (8.0 * noise).max(0.03 * (p999 - bg));
-    let mask: Vec<bool> = lum.data.iter().map(|&v| v as f64 > thr).collect();
-    let excess: Vec<f32> = lum
-        .data
-        .iter()
-        .map(|&v| (v as f64 - bg).max(0.0) as f32)
-        .collect();
-    let all = blobs(&mask, img.width, img.height, Some(&excess));
-    let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
-    let mut found: Vec<_> = all
-        .into_iter()
-        .filter(|b| b.mass >= 0.05 * biggest && b.area >= 30)
-        .collect();
+    let thr = (8.0 * noise).max(0.03 * p999);
+    let mask: Vec<bool> = excess.iter().map(|&v| v as f64 > thr).collect();
+    let mut found: Vec<_> = match &hints {
+        // Where the user said to look: a disc of the hinted size, searched in its own box.
+        Some(h) => {
+            let mut v = vec![];
+            for &(c, r) in h {
+                if !(c[0] >= 0.0 && c[1] >= 0.0 && c[0] < img.width as f64 && c[1] < img.height as f64) {
+                    return Err(Error::invalid(
+                        path,
+                        format!(
+                            "center_px ({:.0}, {:.0}) lies outside the {}×{} photo",
+                            c[0], c[1], img.width, img.height
+                        ),
+                    ));
+                }
+                let clamp = |v: f64, hi: u32| v.clamp(0.0, (hi - 1) as f64) as u32;
+                v.push(crate::silhouette::Blob {
+                    area: (std::f64::consts::PI * r * r) as usize,
+                    centroid: Vector2::new(c[0], c[1]),
+                    bbox: [
+                        clamp(c[0] - r, img.width),
+                        clamp(c[1] - r, img.height),
+                        clamp(c[0] + r, img.width),
+                        clamp(c[1] + r, img.height),
+                    ],
+                    extent: r,
+                    mass: std::f64::consts::PI * r * r,
+                });
+            }
+            v
+        }
+        None => {
+            let all = blobs(&mask, img.width, img.height, Some(&excess));
+            let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
+            all.into_iter()
+                // A sphere stands well out of the backdrop; a patch of backdrop the surface does
+                // not follow (a table's edge against the wall) only just crosses the threshold.
+                .filter(|b| {
+                    b.mass >= 0.05 * biggest
+                        && b.area >= 30
+                        && b.mass >= 4.0 * thr * b.area as f64
+                })
+                .collect()
+        }
+    };
     if found.len() != radii.len() {
         return Err(Error::invalid(
             path,
@@ -272,10 +423,17 @@ pub fn find_spheres(
             ),
         ));
     }
-    found.sort_by(|a, b| a.centroid.x.total_cmp(&b.centroid.x));
+    // Left to right, as session.json lists them (hinted spheres are where the hints say).
+    if hints.is_none() {
+        found.sort_by(|a, b| a.centroid.x.total_cmp(&b.centroid.x));
+    }
     let mut out = vec![];
-    for (b, &radius_mm) in found.iter().zip(radii) {
-        let pad = b.extent.ceil() as u32 + 4;
+    for (b, &radius_mm) in found.iter().zip(&radii) {
+        let pad = if hints.is_some() {
+            (0.4 * b.extent).ceil() as u32 + 4
+        } else {
+            b.extent.ceil() as u32 + 4
+        };
         let region = [
             b.bbox[0].saturating_sub(pad),
             b.bbox[1].saturating_sub(pad),
@@ -285,10 +443,18 @@ pub fn find_spheres(
         let mut inside: Vec<f64> = (b.bbox[1]..=b.bbox[3])
             .flat_map(|y| (b.bbox[0]..=b.bbox[2]).map(move |x| (x, y)))
             .filter(|&(x, y)| mask[(y * img.width + x) as usize])
-            .map(|(x, y)| lum.at(x, y) as f64 - bg)
+            .map(|(x, y)| excess[(y * img.width + x) as usize] as f64)
             .collect();
         inside.sort_by(|a, b| a.total_cmp(b));
-        let level = inside[inside.len() * 9 / 10];
+        let Some(&level) = inside.get(inside.len() * 9 / 10) else {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "nothing brighter than the backdrop near pixel ({:.0}, {:.0}): no sphere there",
+                    b.centroid.x, b.centroid.y
+                ),
+            ));
+        };
         // The sphere's own noise (shot noise grows with the level, so the background's says
         // little about it): 1.4826 × MAD / √2 of horizontal neighbour differences inside the
         // blob. A Sobel component of white noise σ has σ·√12/8 ≈ 0.43σ: 2.5σ keeps false edges
@@ -308,7 +474,17 @@ pub fn find_spheres(
             1.4826 * diffs[k] / std::f64::consts::SQRT_2
         };
         let threshold = (5.0 * noise).max(2.5 * inner_noise).max(0.03 * level);
-        let edges = silhouette::edge_points(lum, region, threshold, proj);
+        let mut edges = silhouette::edge_points(lum, region, threshold, proj);
+        // With a hint, only edges near the hinted rim: a close neighbour's are not this sphere's.
+        let range = if hints.is_some() {
+            edges.retain(|e| {
+                let d = (e.px - b.centroid).norm();
+                d > 0.6 * b.extent && d < 1.4 * b.extent
+            });
+            (0.8 * b.extent, 1.25 * b.extent)
+        } else {
+            (0.3 * b.extent, 2.5 * b.extent)
+        };
         let fail = |what: &str| {
             Error::invalid(
                 path,
@@ -321,7 +497,7 @@ pub fn find_spheres(
                 ),
             )
         };
-        let fit = silhouette::ransac(&edges, proj, (0.3 * b.extent, 2.5 * b.extent), 1.5, 800)
+        let fit = silhouette::ransac(&edges, proj, range, 1.5, 800)
             .ok_or_else(|| fail("no silhouette found among the edges"))?;
         if fit.inliers.len() < 20 {
             return Err(fail("too few silhouette edge points"));
@@ -336,7 +512,7 @@ pub fn find_spheres(
         .ok_or_else(|| fail("silhouette refinement failed"))?;
         // The refinement may not wander off: it starts within a pixel of the edges.
         let shift = fit.outline.distance_px(&refined.outline, proj);
-        let outline = if shift < 3.0 {
+        let outline = if shift < (0.05 * fit.outline.radius_px(proj)).max(3.0) {
             refined.outline
         } else {
             fit.outline
@@ -450,7 +626,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
         .map(|(info, si)| {
             let img = load_linear_rgb(&info.path, si.linear)?;
             let lum = luminance(&img);
-            let f = find_spheres(&img, &lum, &proj, &info.radii_mm, &info.path)?;
+            let f = find_spheres(&img, &lum, &proj, &si.spheres, &info.path)?;
             pb.inc(1);
             Ok((img, lum, f))
         })

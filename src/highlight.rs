@@ -481,9 +481,11 @@ pub fn find(
     let mut starts = vec![0.03, 0.08, 0.2];
     let mut last = None;
     // Angular radius (normal angle) of the clipped core around the highlight.
-    let core_angle = sat_blob
-        .as_ref()
-        .map_or(0.0, |b| ((b.area as f64 / std::f64::consts::PI).sqrt() / r_px).min(1.0).asin());
+    let core_angle = sat_blob.as_ref().map_or(0.0, |b| {
+        ((b.area as f64 / std::f64::consts::PI).sqrt() / r_px)
+            .min(1.0)
+            .asin()
+    });
     for _pass in 0..2 {
         let mut pix = vec![];
         for j in 0..bh {

@@ -169,7 +169,9 @@ pub fn light_frames(
 
 /// The dark-room floor per channel: the median of the pixels outside every sphere (their pixel
 /// boxes grown by a quarter), sampled on a grid of at most ~200 000 points; `None` when fewer
-/// than 1000 such pixels remain (spheres filling the frame).
+/// than 1000 such pixels remain (spheres filling the frame) or when they are lit (a median above
+/// [`DARK_FLOOR_MAX`] of full scale: a backdrop or table, whose light is not in the spheres'
+/// pixels).
 pub fn background(img: &crate::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[f64; 3]> {
     let (w, h) = (img.width as usize, img.height as usize);
     let step = ((w * h / 200_000) as f64).sqrt().max(1.0) as usize;
@@ -204,11 +206,16 @@ pub fn background(img: &crate::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[
     if ch[0].len() < 1000 {
         return None;
     }
-    Some(ch.map(|mut v| {
+    let med = ch.map(|mut v| {
         v.sort_by(|a, b| a.total_cmp(b));
         v[v.len() / 2] as f64
-    }))
+    });
+    med.iter().all(|&m| m <= DARK_FLOOR_MAX).then_some(med)
 }
+
+/// The highest level (pixel value, full scale 1) taken for a dark room's floor (stray light and
+/// black level) rather than a lit backdrop.
+pub const DARK_FLOOR_MAX: f64 = 0.01;
 
 /// The noise model σ² = a + b·L per channel from adjacent-pixel differences (see the module
 /// docs); `floor` is the smallest σ allowed (a quantisation step). Without enough pairs: a
@@ -311,7 +318,10 @@ pub fn observe(
                         .pixel_box(proj, 2.0, img.width, img.height)
                 })
                 .collect();
-            background(img, &boxes).map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
+            sess.floor
+                .map(|f| [f; 3])
+                .or_else(|| background(img, &boxes))
+                .map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
         })
         .collect();
     let mut jobs = vec![];

@@ -3,8 +3,8 @@
 //! `crate::formats::exif`.
 
 use crate::error::{Error, Result};
-use crate::output::write_atomic;
 pub use crate::formats::exif::{relative_exposure, ExifInfo};
+use crate::output::write_atomic;
 use image::codecs::jpeg::JpegEncoder;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};

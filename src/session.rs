@@ -12,6 +12,28 @@ pub const SCHEMA: &str = "workbench.session/1";
 #[serde(deny_unknown_fields)]
 pub struct SessionSphere {
     pub radius_mm: f64,
+    /// Where to look (optional, pixels of the photo as decoded upright): the outline's centre and
+    /// radius, roughly (within a fifth of the radius). Given for every sphere of a photo, the
+    /// spheres are searched there instead of among the bright blobs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub center_px: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_px: Option<f64>,
+}
+
+impl SessionSphere {
+    pub fn new(radius_mm: f64) -> Self {
+        SessionSphere {
+            radius_mm,
+            center_px: None,
+            radius_px: None,
+        }
+    }
+
+    /// The hint (centre, radius in pixels), when given.
+    pub fn hint(&self) -> Option<([f64; 2], f64)> {
+        Some((self.center_px?, self.radius_px?))
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,6 +70,11 @@ pub struct Session {
     pub intrinsics: Option<String>,
     #[serde(default, skip_serializing_if = "is_shared")]
     pub light: LightMode,
+    /// The camera's dark floor (pixel value, full scale 1: black level and stray light, e.g. the
+    /// mean of a photo with the lens capped), subtracted from every photo; without it the floor is
+    /// measured where the photo around the spheres is dark, and not at all before a lit backdrop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor: Option<f64>,
     pub images: Vec<SessionImage>,
 }
 
@@ -76,6 +103,11 @@ impl Session {
         if self.images.is_empty() {
             return bad("no images listed".into());
         }
+        if let Some(f) = self.floor {
+            if !(f.is_finite() && (0.0..0.5).contains(&f)) {
+                return bad(format!("floor must lie in [0, 0.5) of full scale, got {f}"));
+            }
+        }
         for (i, im) in self.images.iter().enumerate() {
             if im.file.trim().is_empty() {
                 return bad(format!("images[{i}] has an empty file name"));
@@ -96,6 +128,28 @@ impl Session {
                         im.file, s.radius_mm
                     ));
                 }
+                if s.center_px.is_some() != s.radius_px.is_some() {
+                    return bad(format!(
+                        "images[{i}] ({}) sphere {j}: give center_px and radius_px together",
+                        im.file
+                    ));
+                }
+                if let (Some(c), Some(r)) = (s.center_px, s.radius_px) {
+                    if !(c.iter().all(|v| v.is_finite()) && r.is_finite() && r >= 4.0) {
+                        return bad(format!(
+                            "images[{i}] ({}) sphere {j}: center_px must be finite and radius_px at least 4 px",
+                            im.file
+                        ));
+                    }
+                }
+            }
+            let hinted = im.spheres.iter().filter(|s| s.center_px.is_some()).count();
+            if hinted != 0 && hinted != im.spheres.len() {
+                return bad(format!(
+                    "images[{i}] ({}): center_px/radius_px for {hinted} of its {} spheres: give them for all or none",
+                    im.file,
+                    im.spheres.len()
+                ));
             }
             if let Some(e) = im.exposure {
                 if !(e.is_finite() && e > 1e-9 && e < 1e9) {
@@ -180,7 +234,11 @@ fn exif_exposures(
     use crate::formats::exif::{REFERENCE_F_NUMBER, REFERENCE_ISO};
     let from_exif: Vec<usize> = (0..images.len())
         .filter(|&i| images[i].exposure.is_none())
-        .filter(|&i| exifs[i].as_ref().is_some_and(|e| e.exposure_time_s.is_some()))
+        .filter(|&i| {
+            exifs[i]
+                .as_ref()
+                .is_some_and(|e| e.exposure_time_s.is_some())
+        })
         .collect();
     // The value the photos that have the field share, or `reference` when none has it.
     let shared = |field: &dyn Fn(&crate::photo::ExifInfo) -> Option<f64>,
@@ -210,21 +268,29 @@ fn exif_exposures(
             (_, None) => Ok(reference),
         }
     };
-    let iso = shared(&|e| e.iso.map(|v| v as f64), "ISO (PhotographicSensitivity)", REFERENCE_ISO)?;
-    let f_number = shared(&|e| e.f_number, "FNumber (nor ApertureValue)", REFERENCE_F_NUMBER)?;
+    let iso = shared(
+        &|e| e.iso.map(|v| v as f64),
+        "ISO (PhotographicSensitivity)",
+        REFERENCE_ISO,
+    )?;
+    let f_number = shared(
+        &|e| e.f_number,
+        "FNumber (nor ApertureValue)",
+        REFERENCE_F_NUMBER,
+    )?;
     for &i in &from_exif {
         let e = exifs[i].as_ref().expect("filtered above");
         images[i].exposure = e.relative_exposure_with(iso, f_number);
         images[i].exposure_source = Some("EXIF");
         if e.iso.is_none() {
-            images[i]
-                .exif_notes
-                .push(format!("no ISO in EXIF: taken as {iso}, as the other photos"));
+            images[i].exif_notes.push(format!(
+                "no ISO in EXIF: taken as {iso}, as the other photos"
+            ));
         }
         if e.f_number.is_none() {
-            images[i]
-                .exif_notes
-                .push(format!("no f-number in EXIF: taken as f/{f_number}, as the other photos"));
+            images[i].exif_notes.push(format!(
+                "no f-number in EXIF: taken as f/{f_number}, as the other photos"
+            ));
         }
     }
     Ok(())
@@ -263,7 +329,11 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
         let bits = ct.bytes_per_pixel() / channels * 8;
         let exif = crate::photo::ExifInfo::read(&p)?;
         // Photos are decoded upright (`photo::decode_oriented`): orientations 5–8 swap the sides.
-        if exif.as_ref().and_then(|e| e.orientation).is_some_and(|o| (5..=8).contains(&o)) {
+        if exif
+            .as_ref()
+            .and_then(|e| e.orientation)
+            .is_some_and(|o| (5..=8).contains(&o))
+        {
             std::mem::swap(&mut width, &mut height);
         }
         if let Some(cam) = &camera {

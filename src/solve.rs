@@ -1030,6 +1030,23 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
     let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
     let mut notes = vec![];
+    // A photo whose surroundings are lit (a backdrop, a table) gives no dark floor to subtract.
+    let unmeasured: Vec<&str> = {
+        let mut v: Vec<&str> = l
+            .spheres
+            .iter()
+            .filter(|s| s.floor.is_none())
+            .map(|s| s.image.as_str())
+            .collect();
+        v.dedup();
+        v
+    };
+    if !unmeasured.is_empty() {
+        notes.push(format!(
+            "no dark floor measured for {} (the photo around the spheres is lit or covered): none subtracted, and σ0 rests on the unlit side's level, which the floor raises — a floor of 0.2% of full scale moved σ0 by 6–18% in the synthetic backdrop tests; give \"floor\" in session.json (a lens-capped photo's mean)",
+            unmeasured.join(", ")
+        ));
+    }
     let mut model_choice = None;
     let mut baseline = None;
     let t_solve = Instant::now();

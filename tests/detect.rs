@@ -173,6 +173,31 @@ fn row_of_spheres_left_to_right_and_count_mismatch() {
         e.contains("row.png") && e.contains("found 3 sphere(s), session.json lists 2"),
         "{e}"
     );
+    // Told where to look (rough hints: 3 px and 10% of the radius off), the two listed spheres
+    // are found and the third is ignored; the outlines as good as without hints.
+    edit_session(dir.path(), |v| {
+        for (k, ts) in t.images[0].spheres.iter().take(2).enumerate() {
+            let c = ts.ellipse.center_px;
+            v["images"][0]["spheres"][k]["center_px"] = serde_json::json!([c[0] + 3.0, c[1] - 2.0]);
+            v["images"][0]["spheres"][k]["radius_px"] =
+                serde_json::json!(1.1 * ts.ellipse.axes_px[0]);
+        }
+    });
+    let d = run(dir.path()).unwrap();
+    assert_eq!(d.images[0].spheres.len(), 2);
+    for (s, ts) in d.images[0].spheres.iter().zip(&t.images[0].spheres) {
+        let dc = (Vector2::from(s.ellipse.center_px) - Vector2::from(ts.ellipse.center_px)).norm();
+        println!("hinted r {}: centre {dc:.3} px", s.radius_mm);
+        assert!(dc < 0.15, "hinted r {}: {dc}", s.radius_mm);
+    }
+    // A hint for one sphere of two is refused, naming the photo.
+    edit_session(dir.path(), |v| {
+        let s = &mut v["images"][0]["spheres"][1];
+        s.as_object_mut().unwrap().remove("center_px");
+        s.as_object_mut().unwrap().remove("radius_px");
+    });
+    let e = run(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("row.png") && e.contains("all or none"), "{e}");
 }
 
 #[test]
@@ -377,7 +402,11 @@ fn clipped_highlights_are_fitted_and_refined() {
             assert_eq!(h.method, workbench::highlight::Method::LobeFit);
             // The roughness from the ring alone: measured within 15% up to 10% clipped, 40–55% at 22%.
             let tol = if clipped < 0.1 { 0.25 } else { 0.6 };
-            assert!((h.alpha.unwrap() / alpha - 1.0).abs() < tol, "{:?}", h.alpha);
+            assert!(
+                (h.alpha.unwrap() / alpha - 1.0).abs() < tol,
+                "{:?}",
+                h.alpha
+            );
             assert!(dl < 3.0 * std, "{}: {dl}° ± {std}°", im.file);
         }
         let dl = angle_deg(d.light_direction.as_ref().unwrap(), &t.light_direction);
@@ -394,5 +423,87 @@ fn clipped_highlights_are_fitted_and_refined() {
             .to_degrees();
         println!("α {alpha} ks {ks}: solved light {dl:.4}°, {}", f.light_fit);
         assert!(dl < 0.1, "{dl}");
+    }
+}
+
+/// Spheres before a grey card (8–22% of full scale, a gradient) and resting on a lit table with
+/// their shadows: outlines and light as on black, and σ0 as on black once the dark floor is given
+/// (a lit backdrop leaves it unmeasured, which the solve says).
+#[test]
+fn grey_backdrop_and_table() {
+    use workbench::synth::session::Backdrop;
+    let make = |backdrop| {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = SessionConfig {
+            radii_mm: vec![35.0, 25.0, 15.0],
+            camera: common::camera_640x480(),
+            backdrop,
+            noise: 0.003,
+            ..SessionConfig::default()
+        };
+        session::generate(&cfg, dir.path(), None, true).unwrap();
+        dir
+    };
+    let solve = |dir: &Path| {
+        let mut o = workbench::solve::Options::new(dir);
+        o.jackknife = false;
+        o.quiet = true;
+        workbench::solve::run(&o).unwrap()
+    };
+    let black = make(Backdrop::Black);
+    run(black.path()).unwrap();
+    let f_black = solve(black.path());
+    for backdrop in [Backdrop::Grey, Backdrop::Table] {
+        let dir = make(backdrop);
+        let d = run(dir.path()).unwrap();
+        let t = truth(dir.path());
+        for (im, ti) in d.images.iter().zip(&t.images) {
+            let (s, ts) = (&im.spheres[0], &ti.spheres[0]);
+            let dc =
+                (Vector2::from(s.ellipse.center_px) - Vector2::from(ts.ellipse.center_px)).norm();
+            let da = (s.ellipse.axes_px[0] - ts.ellipse.axes_px[0]).abs();
+            println!(
+                "{backdrop:?} {}: centre {dc:.3} px, axis {da:.3} px",
+                im.file
+            );
+            // Measured ≤ 0.043 px.
+            assert!(dc < 0.1 && da < 0.1, "{backdrop:?} {}: {dc} {da}", im.file);
+        }
+        let dl = angle_deg(d.light_direction.as_ref().unwrap(), &t.light_direction);
+        let std = d.light_std_deg.unwrap();
+        println!("{backdrop:?}: detector's light {dl:.4}° ± {std:.4}°");
+        // Measured 0.032° ± 0.016° (grey), 0.054° ± 0.016° (table: 3.3 of its std, not covered;
+        // docs/measured.md). The solve's light below meets the 0.05° goal on both.
+        assert!(dl < 0.06, "{backdrop:?}: {dl}° ± {std}°");
+        // Without the floor: none subtracted, and said.
+        let f = solve(dir.path());
+        assert!(
+            f.notes.iter().any(|n| n.contains("no dark floor measured")),
+            "{:?}",
+            f.notes
+        );
+        // With it (truth's ambient), σ0 as on black.
+        let p = dir.path().join("session.json");
+        let mut s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+        s["floor"] = serde_json::json!(t.render.ambient);
+        std::fs::write(&p, s.to_string()).unwrap();
+        let f = solve(dir.path());
+        let dl = Vector3::from(f.light_direction)
+            .angle(&Vector3::from(t.light_direction))
+            .to_degrees();
+        println!("{backdrop:?}: solved light {dl:.4}°");
+        assert!(dl < 0.05, "{backdrop:?}: {dl}°");
+        let worst = (0..3)
+            .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
+            .fold(0.0, f64::max);
+        println!(
+            "{backdrop:?}: σ0 {:?} vs black {:?}: {:.2}%",
+            f.sigma0_mm,
+            f_black.sigma0_mm,
+            100.0 * worst
+        );
+        // Measured 0.27% (grey), 0.37% (table); the goal 0.5%.
+        assert!(worst < 0.005, "{backdrop:?}: {worst}");
     }
 }

@@ -36,10 +36,20 @@ fn short(tag: u16, v: u16) -> Entry {
     entry(tag, SHORT, 1, v.to_le_bytes().to_vec())
 }
 fn rational(tag: u16, num: u32, den: u32) -> Entry {
-    entry(tag, RATIONAL, 1, [num.to_le_bytes(), den.to_le_bytes()].concat())
+    entry(
+        tag,
+        RATIONAL,
+        1,
+        [num.to_le_bytes(), den.to_le_bytes()].concat(),
+    )
 }
 fn srational(tag: u16, num: i32, den: i32) -> Entry {
-    entry(tag, SRATIONAL, 1, [num.to_le_bytes(), den.to_le_bytes()].concat())
+    entry(
+        tag,
+        SRATIONAL,
+        1,
+        [num.to_le_bytes(), den.to_le_bytes()].concat(),
+    )
 }
 fn ascii(tag: u16, s: &str) -> Entry {
     let mut b = s.as_bytes().to_vec();
@@ -64,7 +74,7 @@ const MAKER_NOTE: u16 = 0x927c;
 fn tiff(ifd0: Vec<Entry>, exif: Vec<Entry>, exif_next: u32) -> Vec<u8> {
     let mut out = b"II*\0".to_vec();
     out.extend(0u32.to_le_bytes()); // IFD0 offset, patched below
-    // Values longer than 4 bytes first, so that a cut through an IFD keeps them.
+                                    // Values longer than 4 bytes first, so that a cut through an IFD keeps them.
     let place = |es: &[Entry], out: &mut Vec<u8>| -> Vec<u32> {
         es.iter()
             .map(|e| {
@@ -108,7 +118,11 @@ fn tiff(ifd0: Vec<Entry>, exif: Vec<Entry>, exif_next: u32) -> Vec<u8> {
         write(&mut out, e, at);
     }
     if !exif.is_empty() {
-        write(&mut out, &entry(EXIF_IFD, LONG, 1, exif_at.to_le_bytes().to_vec()), 0);
+        write(
+            &mut out,
+            &entry(EXIF_IFD, LONG, 1, exif_at.to_le_bytes().to_vec()),
+            0,
+        );
     }
     out.extend(0u32.to_le_bytes());
     if !exif.is_empty() {
@@ -148,11 +162,18 @@ fn dir(name: &str) -> PathBuf {
 /// A 64×48 grey JPEG carrying `block` as its EXIF.
 fn jpeg(path: &Path, block: Vec<u8>) {
     use image::ImageEncoder;
-    let mut enc =
-        image::codecs::jpeg::JpegEncoder::new_with_quality(std::fs::File::create(path).unwrap(), 90);
+    let mut enc = image::codecs::jpeg::JpegEncoder::new_with_quality(
+        std::fs::File::create(path).unwrap(),
+        90,
+    );
     enc.set_exif_metadata(block).unwrap();
-    enc.write_image(&[100u8; 64 * 48 * 3], 64, 48, image::ExtendedColorType::Rgb8)
-        .unwrap();
+    enc.write_image(
+        &[100u8; 64 * 48 * 3],
+        64,
+        48,
+        image::ExtendedColorType::Rgb8,
+    )
+    .unwrap();
 }
 
 fn read(name: &str, block: Vec<u8>) -> ExifInfo {
@@ -238,14 +259,26 @@ fn zero_denominator_falls_back_to_apex_or_says_so() {
     let e = read("zero-apex", tiff(camera_ifd0(), exif, 0));
     let x = e.relative_exposure().unwrap();
     assert!((x - exposure(1.0 / 64.0, 100.0, 5.6)).abs() < 1e-12, "{x}");
-    assert!(e.notes.iter().any(|n| n.contains("ExposureTime is 1/0")), "{:?}", e.notes);
-    assert!(e.notes.iter().any(|n| n.contains("ShutterSpeedValue")), "{:?}", e.notes);
+    assert!(
+        e.notes.iter().any(|n| n.contains("ExposureTime is 1/0")),
+        "{:?}",
+        e.notes
+    );
+    assert!(
+        e.notes.iter().any(|n| n.contains("ShutterSpeedValue")),
+        "{:?}",
+        e.notes
+    );
     // Without it the exposure is unknown, and says why.
     let mut exif = camera_exif(100);
     exif[0] = rational(EXPOSURE_TIME, 1, 0);
     let e = read("zero", tiff(camera_ifd0(), exif, 0));
     assert_eq!(e.exposure_time_s, None);
-    assert!(e.no_exposure.as_deref().unwrap().contains("ExposureTime is 1/0"));
+    assert!(e
+        .no_exposure
+        .as_deref()
+        .unwrap()
+        .contains("ExposureTime is 1/0"));
 }
 
 #[test]
@@ -305,7 +338,10 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let err = workbench::session::inspect(&session(&d, &["a.jpg", "z.jpg"]))
         .unwrap_err()
         .to_string();
-    assert!(err.contains("z.jpg") && err.contains("ExposureTime is 1/0"), "{err}");
+    assert!(
+        err.contains("z.jpg") && err.contains("ExposureTime is 1/0"),
+        "{err}"
+    );
     assert_eq!(err.lines().count(), 1, "{err}");
     let _ = std::fs::remove_dir_all(&d);
 }
@@ -344,8 +380,14 @@ fn tiff16(path: &Path, w: u32, h: u32, px: &[u16]) {
         f(Tag::RowsPerStrip, Value::Long(vec![h])),
         f(Tag::PlanarConfiguration, Value::Short(vec![1])),
         f(Tag::Make, Value::Ascii(vec![b"Maker".to_vec()])),
-        f(Tag::ExposureTime, Value::Rational(vec![Rational { num: 1, denom: 125 }])),
-        f(Tag::FNumber, Value::Rational(vec![Rational { num: 11, denom: 1 }])),
+        f(
+            Tag::ExposureTime,
+            Value::Rational(vec![Rational { num: 1, denom: 125 }]),
+        ),
+        f(
+            Tag::FNumber,
+            Value::Rational(vec![Rational { num: 11, denom: 1 }]),
+        ),
         f(Tag::PhotographicSensitivity, Value::Short(vec![100])),
     ];
     let bytes: Vec<u8> = px.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -370,12 +412,18 @@ fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
     let im = &r.images[0];
     assert_eq!((im.bits, im.linear, im.width, im.height), (16, true, w, h));
     let x = im.exposure.unwrap();
-    assert!((x - exposure(1.0 / 125.0, 100.0, 11.0)).abs() < 1e-12, "{x}");
+    assert!(
+        (x - exposure(1.0 / 125.0, 100.0, 11.0)).abs() < 1e-12,
+        "{x}"
+    );
     assert!(im.exif_notes.is_empty(), "{:?}", im.exif_notes);
     // Linear: value / 65535, no transfer curve.
     let img = workbench::photo::load_linear_rgb(&d.join("a.tiff"), None).unwrap();
     for (k, (&a, &b)) in img.data.iter().zip(&px).enumerate().step_by(97) {
-        assert!((a as f64 - b as f64 / 65535.0).abs() < 1e-6, "sample {k}: {a} vs {b}");
+        assert!(
+            (a as f64 - b as f64 / 65535.0).abs() < 1e-6,
+            "sample {k}: {a} vs {b}"
+        );
     }
     let _ = std::fs::remove_dir_all(&d);
 }

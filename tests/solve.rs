@@ -586,9 +586,10 @@ fn one_light_per_photo() {
             seed: 10 + k as u64,
             ..base.clone()
         });
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(one.path().join("session.json")).unwrap())
-                .unwrap();
+        let s: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(one.path().join("session.json")).unwrap(),
+        )
+        .unwrap();
         let file = s["images"][0]["file"].as_str().unwrap().to_string();
         std::fs::copy(one.path().join(&file), per.path().join(&file)).unwrap();
         std::fs::copy(

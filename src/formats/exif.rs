@@ -115,8 +115,14 @@ impl ExifInfo {
             value,
         };
         let mut fields = vec![
-            field(Tag::Make, Value::Ascii(vec![self.make.clone().into_bytes()])),
-            field(Tag::Model, Value::Ascii(vec![self.model.clone().into_bytes()])),
+            field(
+                Tag::Make,
+                Value::Ascii(vec![self.make.clone().into_bytes()]),
+            ),
+            field(
+                Tag::Model,
+                Value::Ascii(vec![self.model.clone().into_bytes()]),
+            ),
         ];
         if let Some(t) = self.exposure_time_s {
             fields.push(field(
@@ -125,7 +131,10 @@ impl ExifInfo {
             ));
         }
         if let Some(n) = self.f_number {
-            fields.push(field(Tag::FNumber, Value::Rational(vec![rational(n, 1000)])));
+            fields.push(field(
+                Tag::FNumber,
+                Value::Rational(vec![rational(n, 1000)]),
+            ));
         }
         if let Some(iso) = self.iso {
             fields.push(field(
@@ -134,7 +143,10 @@ impl ExifInfo {
             ));
         }
         if let Some(f) = self.focal_length_mm {
-            fields.push(field(Tag::FocalLength, Value::Rational(vec![rational(f, 1000)])));
+            fields.push(field(
+                Tag::FocalLength,
+                Value::Rational(vec![rational(f, 1000)]),
+            ));
         }
         if let Some(f35) = self.focal_length_35mm {
             fields.push(field(
@@ -183,7 +195,12 @@ impl ExifInfo {
         errors: &[exif::Error],
     ) -> ExifInfo {
         let fields: Vec<&Field> = fields.filter(|f| f.ifd_num == In::PRIMARY).collect();
-        let get = |n: u16| fields.iter().find(|f| f.tag.number() == n).map(|f| &f.value);
+        let get = |n: u16| {
+            fields
+                .iter()
+                .find(|f| f.tag.number() == n)
+                .map(|f| &f.value)
+        };
         let mut info = ExifInfo::default();
         for e in errors {
             info.notes.push(match e.to_string().as_str() {
@@ -212,7 +229,9 @@ impl ExifInfo {
                 }
             };
             if den == 0.0 {
-                notes.push(format!("EXIF {name} is {num}/0 (zero denominator): ignored"));
+                notes.push(format!(
+                    "EXIF {name} is {num}/0 (zero denominator): ignored"
+                ));
                 return None;
             }
             let v = num / den;
@@ -247,10 +266,12 @@ impl ExifInfo {
             })
         });
         if info.exposure_time_s.is_none() {
-            info.no_exposure = Some(match info.notes.iter().find(|n| n.contains("ExposureTime")) {
-                Some(n) => n.clone(),
-                None => "its EXIF has neither ExposureTime nor ShutterSpeedValue".into(),
-            });
+            info.no_exposure = Some(
+                match info.notes.iter().find(|n| n.contains("ExposureTime")) {
+                    Some(n) => n.clone(),
+                    None => "its EXIF has neither ExposureTime nor ShutterSpeedValue".into(),
+                },
+            );
         }
         info.f_number = f_number.or_else(|| {
             let n = 2f64.powf(apex(APERTURE)? / 2.0);

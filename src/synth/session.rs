@@ -635,7 +635,7 @@ pub fn generate(
             spheres: p
                 .spheres
                 .iter()
-                .map(|(r, _)| SessionSphere { radius_mm: *r })
+                .map(|(r, _)| SessionSphere::new(*r))
                 .collect(),
             exposure: (cfg.format == Format::Png16).then_some(cfg.exposure),
             linear: None,
@@ -659,6 +659,7 @@ pub fn generate(
         material: Some(cfg.material_name.clone()),
         intrinsics: Some(intrinsics_ref),
         light: Default::default(),
+        floor: None,
         images: session_images,
     };
     let l = cfg.light.direction();

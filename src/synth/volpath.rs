@@ -536,13 +536,12 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
         material: Some(format!("{} (physically based render)", cfg.material_name)),
         intrinsics: Some("intrinsics.json".into()),
         light: Default::default(),
+        floor: None,
         images: photos
             .iter()
             .map(|p| SessionImage {
                 file: p.file.clone(),
-                spheres: vec![SessionSphere {
-                    radius_mm: p.radius_mm,
-                }],
+                spheres: vec![SessionSphere::new(p.radius_mm)],
                 exposure: None,
                 linear: None,
             })
