@@ -362,7 +362,11 @@ pub fn find_spheres(
         Some(h) => {
             let mut v = vec![];
             for &(c, r) in h {
-                if !(c[0] >= 0.0 && c[1] >= 0.0 && c[0] < img.width as f64 && c[1] < img.height as f64) {
+                if !(c[0] >= 0.0
+                    && c[1] >= 0.0
+                    && c[0] < img.width as f64
+                    && c[1] < img.height as f64)
+                {
                     return Err(Error::invalid(
                         path,
                         format!(
@@ -394,9 +398,7 @@ pub fn find_spheres(
                 // A sphere stands well out of the backdrop; a patch of backdrop the surface does
                 // not follow (a table's edge against the wall) only just crosses the threshold.
                 .filter(|b| {
-                    b.mass >= 0.05 * biggest
-                        && b.area >= 30
-                        && b.mass >= 4.0 * thr * b.area as f64
+                    b.mass >= 0.05 * biggest && b.area >= 30 && b.mass >= 4.0 * thr * b.area as f64
                 })
                 .collect()
         }
