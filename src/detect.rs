@@ -403,6 +403,18 @@ pub fn find_spheres(
                 .collect()
         }
     };
+    // More blobs than spheres: the least disc-like go (a pin or stand under a sphere, a cable) —
+    // a disc fills π·extent² about its centroid, a pin a few percent of it. Only past 30%: a lit
+    // crescent of a back-lit sphere fills less than a disc, and is still a sphere.
+    if found.len() > radii.len() {
+        let fill = |b: &crate::silhouette::Blob| {
+            b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0)
+        };
+        found.sort_by(|a, b| fill(b).total_cmp(&fill(a)));
+        while found.len() > radii.len() && found.last().is_some_and(|b| fill(b) < 0.3) {
+            found.pop();
+        }
+    }
     if found.len() != radii.len() {
         return Err(Error::invalid(
             path,
@@ -485,7 +497,12 @@ pub fn find_spheres(
             });
             (0.8 * b.extent, 1.25 * b.extent)
         } else {
-            (0.3 * b.extent, 2.5 * b.extent)
+            // The blob's size: its farthest pixel, unless something thin hangs on it (a pin
+            // under the sphere), when its area says better.
+            let size = b
+                .extent
+                .min(1.5 * (b.area as f64 / std::f64::consts::PI).sqrt());
+            (0.3 * size, 2.5 * size)
         };
         let fail = |what: &str| {
             Error::invalid(

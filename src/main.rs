@@ -543,6 +543,9 @@ struct SessionArgs {
     /// matte table the spheres rest on, with their shadows, before a grey wall.
     #[arg(long, value_enum, default_value = "black")]
     backdrop: BackdropArg,
+    /// Hold each sphere up on a thin matte pin under it.
+    #[arg(long)]
+    stand: bool,
     #[command(flatten)]
     camera: CameraArgs,
     #[command(flatten)]
@@ -704,6 +707,7 @@ fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
             BackdropArg::Grey => Backdrop::Grey,
             BackdropArg::Table => Backdrop::Table,
         },
+        stand: a.stand,
         camera: a.camera.camera()?,
         light: a.light.angles(),
         material: Material {

@@ -58,6 +58,26 @@ pub enum Backdrop {
 /// The table's diffuse albedo (π·radiance / irradiance) and the wall's level behind it.
 pub const TABLE_ALBEDO: f64 = 0.3;
 pub const WALL_LEVEL: f64 = 0.10;
+/// The stand's pin radius (mm).
+pub const PIN_RADIUS_MM: f64 = 1.5;
+
+/// The nearest hit of a camera ray `d` on a sphere's pin (a vertical cylinder under it): the
+/// distance and the pin's outward normal there.
+fn pin_hit(r: f64, s: &Sphere, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+    let c = s.center;
+    let a = d.x * d.x + d.z * d.z;
+    let b = -2.0 * (d.x * c.x + d.z * c.z);
+    let cc = c.x * c.x + c.z * c.z - PIN_RADIUS_MM * PIN_RADIUS_MM;
+    let disc = b * b - 4.0 * a * cc;
+    if a <= 0.0 || disc < 0.0 {
+        return None;
+    }
+    let t = (-b - disc.sqrt()) / (2.0 * a);
+    let p = d * t;
+    // From inside the sphere's bottom down three radii.
+    (t > 0.0 && p.y > c.y + 0.9 * r && p.y < c.y + r + 3.0 * r)
+        .then(|| (t, Vector3::new(p.x - c.x, 0.0, p.z - c.z).normalize()))
+}
 
 /// Everything that defines a synthetic session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -83,6 +103,10 @@ pub struct SessionConfig {
     /// What lies behind and under the spheres.
     #[serde(default)]
     pub backdrop: Backdrop,
+    /// Each sphere held up by a thin matte pin under it (radius [`PIN_RADIUS_MM`], albedo 0.5, three
+    /// sphere radii long, lit by the same light; it casts no shadow).
+    #[serde(default)]
+    pub stand: bool,
     /// Edge supersampling: n×n samples per silhouette pixel.
     pub supersample: u32,
     pub format: Format,
@@ -146,6 +170,7 @@ impl Default for SessionConfig {
             read_noise: 5e-4,
             ambient: 2e-3,
             backdrop: Backdrop::Black,
+            stand: false,
             supersample: 4,
             format: Format::Png16,
             jpeg_quality: 95,
@@ -215,6 +240,8 @@ pub struct RenderTruth {
     pub layout: Layout,
     #[serde(default)]
     pub backdrop: Backdrop,
+    #[serde(default)]
+    pub stand: bool,
 }
 
 /// One image of the session: its file name and spheres (left to right).
@@ -408,6 +435,18 @@ fn shade(
             }
         }
     }
+    if cfg.stand {
+        let pin = spheres
+            .iter()
+            .filter_map(|(r, s)| pin_hit(*r, s, d))
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((t, n)) = pin {
+            if best.is_none_or(|(bt, _)| t < bt) {
+                let lit = n.dot(&cfg.light.direction()).max(0.0);
+                return [cfg.exposure * 0.5 * lit + cfg.ambient; 3];
+            }
+        }
+    }
     let Some((_, i)) = best else {
         return backdrop(cfg, spheres, d);
     };
@@ -492,7 +531,7 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     img.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let yf = y as f64;
         let everywhere = [[0.0, yf, (w - 1) as f64, yf]];
-        let boxes: &[[f64; 4]] = if cfg.backdrop == Backdrop::Black {
+        let boxes: &[[f64; 4]] = if cfg.backdrop == Backdrop::Black && !cfg.stand {
             &boxes
         } else {
             &everywhere
@@ -691,6 +730,7 @@ pub fn generate(
             seed: cfg.seed,
             layout: cfg.layout,
             backdrop: cfg.backdrop,
+            stand: cfg.stand,
         },
     };
     let session_file = out.join("session.json");
