@@ -71,8 +71,10 @@ pub struct Highlight {
     pub saturated: usize,
     /// Angular radius of the highlight region on the sphere (normals within it are flagged).
     pub radius: f64,
-    /// Half the angle between the lights fitted with the two kinds of diffuse trend (radians;
-    /// 0 for a centroid): an error every sphere of a session shares, included in `cov`.
+    /// The lobe fit's model error (radians; 0 for a centroid): the larger of half the angle
+    /// between the lights fitted with the two kinds of diffuse trend and the shift when the
+    /// clipped pixels are left out rather than censored. Shared by every sphere of a session;
+    /// included in `cov`.
     pub trend_spread: f64,
 }
 
@@ -87,6 +89,7 @@ impl Highlight {
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoHighlight(pub String);
 
+#[derive(Clone, Copy)]
 struct Px {
     px: Vector2<f64>,
     n: Vector3<f64>,
@@ -546,32 +549,6 @@ pub fn find(
             .max(2.0 * core_angle + 4f64.to_radians())
             .clamp(6f64.to_radians(), 45f64.to_radians());
     }
-    // The lobe against the other kind of diffuse trend, on the last pass's pixels: how far the
-    // two lights lie apart is an error of the trend model that σ²(JᵀJ)⁻¹ does not see (a broad
-    // lobe trades with the shading under it). The light is their midpoint, and half their
-    // distance enters its covariance, isotropic in the tangent plane.
-    let shading_light = last.as_ref().and_then(|(fit, pix, x)| {
-        let f2 = Fit {
-            trend: Trend::Shading,
-            ..*fit
-        };
-        let (x2, _, c2, _) = solve(&f2, pix, *x)?;
-        (c2[NLIN - 1] > 0.0).then(|| f2.light(&x2))
-    });
-    // And with the clipped pixels left out rather than censored: how much the clipped core's
-    // treatment matters.
-    let uncensored_light = last.as_ref().and_then(|(fit, pix, x)| {
-        if !pix.iter().any(|p| p.clipped) {
-            return None;
-        }
-        let kept: Vec<Px> = pix
-            .iter()
-            .filter(|p| !p.clipped)
-            .map(|p| Px { ..*p })
-            .collect();
-        let (x2, _, c2, _) = solve(fit, &kept, *x)?;
-        (c2[NLIN - 1] > 0.0).then(|| fit.light(&x2))
-    });
     let fitted = result.and_then(|(l, alpha, sigma2, amp, trend, j, b1, b2, npix)| {
         let significant = amp > 6.0 * sigma2.sqrt().max(noise) && amp > 0.02 * trend.abs();
         let plausible = alpha > 1.5e-3 && alpha < MAX_ALPHA && npix >= 20;
@@ -582,6 +559,29 @@ pub fn find(
         // The angles are steps along the last pass's basis (b1, b2) at its start direction.
         let e = Matrix3x2::from_columns(&[b1, b2]);
         let c2 = Matrix2::new(cov3[(0, 0)], cov3[(0, 1)], cov3[(1, 0)], cov3[(1, 1)]);
+        // For a lobe worth keeping, the lobe against the other kind of diffuse trend, on the last
+        // pass's pixels: how far the two lights lie apart is an error of the trend model that
+        // σ²(JᵀJ)⁻¹ does not see (a broad lobe trades with the shading under it). The light is
+        // their midpoint, and half their distance enters its covariance, isotropic in the
+        // tangent plane.
+        let shading_light = last.as_ref().and_then(|(fit, pix, x)| {
+            let f2 = Fit {
+                trend: Trend::Shading,
+                ..*fit
+            };
+            let (x2, _, lin, _) = solve(&f2, pix, *x)?;
+            (lin[NLIN - 1] > 0.0).then(|| f2.light(&x2))
+        });
+        // And with the clipped pixels left out rather than censored: how much the clipped core's
+        // treatment matters.
+        let uncensored_light = last.as_ref().and_then(|(fit, pix, x)| {
+            if !pix.iter().any(|p| p.clipped) {
+                return None;
+            }
+            let kept: Vec<Px> = pix.iter().filter(|p| !p.clipped).copied().collect();
+            let (x2, _, lin, _) = solve(fit, &kept, *x)?;
+            (lin[NLIN - 1] > 0.0).then(|| fit.light(&x2))
+        });
         let (l, spread) = match shading_light {
             Some(l2) if l2.angle(&l) < 0.35 => {
                 let mid = (l + l2).normalize();

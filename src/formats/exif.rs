@@ -57,6 +57,15 @@ const ORIENTATION: u16 = 0x0112;
 const MAKE: u16 = 0x010f;
 const MODEL: u16 = 0x0110;
 
+/// The first value of a rational field, signed or not, as (numerator, denominator).
+fn ratio(v: &Value) -> Option<(f64, f64)> {
+    match v {
+        Value::Rational(r) => r.first().map(|q| (q.num as f64, q.denom as f64)),
+        Value::SRational(r) => r.first().map(|q| (q.num as f64, q.denom as f64)),
+        _ => None,
+    }
+}
+
 /// How a decoder turns a photo of each Orientation upright (EXIF 2.3, table of Orientation).
 fn orientation_words(o: u16) -> &'static str {
     match o {
@@ -218,15 +227,10 @@ impl ExifInfo {
         info.make = ascii(MAKE);
         info.model = ascii(MODEL);
         // A positive finite rational, or a note saying why the field was not used.
-        let mut notes = vec![];
-        let mut positive = |n: u16, name: &str| -> Option<f64> {
-            let (num, den) = match get(n)? {
-                Value::Rational(v) if !v.is_empty() => (v[0].num as f64, v[0].denom as f64),
-                Value::SRational(v) if !v.is_empty() => (v[0].num as f64, v[0].denom as f64),
-                _ => {
-                    notes.push(format!("EXIF {name} is not a rational number: ignored"));
-                    return None;
-                }
+        let positive = |n: u16, name: &str, notes: &mut Vec<String>| -> Option<f64> {
+            let Some((num, den)) = ratio(get(n)?) else {
+                notes.push(format!("EXIF {name} is not a rational number: ignored"));
+                return None;
             };
             if den == 0.0 {
                 notes.push(format!(
@@ -241,20 +245,13 @@ impl ExifInfo {
             }
             Some(v)
         };
-        let time = positive(EXPOSURE_TIME, "ExposureTime");
-        let f_number = positive(F_NUMBER, "FNumber");
-        let focal = positive(FOCAL_LENGTH, "FocalLength");
-        drop(positive);
-        info.notes.append(&mut notes);
-        // APEX values may be negative (Tv < 0: longer than 1 s), so read them signed.
-        let apex = |n: u16| match get(n) {
-            Some(Value::SRational(v)) if !v.is_empty() && v[0].denom != 0 => {
-                Some(v[0].num as f64 / v[0].denom as f64)
-            }
-            Some(Value::Rational(v)) if !v.is_empty() && v[0].denom != 0 => {
-                Some(v[0].num as f64 / v[0].denom as f64)
-            }
-            _ => None,
+        let time = positive(EXPOSURE_TIME, "ExposureTime", &mut info.notes);
+        let f_number = positive(F_NUMBER, "FNumber", &mut info.notes);
+        let focal = positive(FOCAL_LENGTH, "FocalLength", &mut info.notes);
+        // APEX values may be negative (Tv < 0: longer than 1 s), so they are read signed.
+        let apex = |n: u16| {
+            let (num, den) = ratio(get(n)?)?;
+            (den != 0.0).then(|| num / den)
         };
         info.exposure_time_s = time.or_else(|| {
             let t = 2f64.powf(-apex(SHUTTER_SPEED)?);
