@@ -134,6 +134,7 @@ fn bench_normal_equations(c: &mut Criterion) {
         u: to_unbounded(&params.to_vec()),
         priors: vec![],
         history: None,
+        floor: false,
     };
     let mut g = c.benchmark_group("normal_equations_100k");
     g.throughput(Throughput::Elements(n as u64));

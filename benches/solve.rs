@@ -113,6 +113,7 @@ fn level_fit(l: &solve::Loaded, opts: &Options, reduction: Reduction) -> (f64, j
         warm: None,
         light_fit: joint::LightFit::Prior,
         light_std: l.light_std,
+        floor: l.fit_floor,
     };
     let spheres: Vec<&workbench::observe::SphereData> = l.spheres.iter().collect();
     let t0 = Instant::now();

@@ -123,6 +123,9 @@ pub struct Setup {
     /// The detector's standard error of its light (radians, the largest axis): the width of the
     /// light's prior under [`LightFit::Prior`].
     pub light_std: Option<f64>,
+    /// The photos' dark floor is unknown (lit surroundings): a constant per channel fitted with
+    /// the rest ([`solver::fit_with_floor`]; [`Fit::floor`] holds it).
+    pub floor: bool,
 }
 
 /// How the joint fit treats the light direction.
@@ -465,7 +468,16 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         let t = std::time::Instant::now();
         let cells = pooled.merged(8);
         let obs: Vec<Obs> = pooled.observations(&cells);
-        let (f, _, _) = solver::fit_robust(model, &obs, &p, free, &light_priors, HUBER_K, 4);
+        let (f, _, _) = solver::fit_robust(
+            model,
+            &obs,
+            &p,
+            free,
+            &light_priors,
+            setup.floor,
+            HUBER_K,
+            4,
+        );
         stages.push(Stage::of(
             "diffuse (2° cells, highlight left out)",
             obs.len(),
@@ -658,9 +670,18 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     for attempt in 0..3 {
         let t = std::time::Instant::now();
         let (f, _, down) = if setup.robust {
-            solver::fit_robust(model, &final_obs, &p, free, &priors, HUBER_K, 6)
+            solver::fit_robust(
+                model,
+                &final_obs,
+                &p,
+                free,
+                &priors,
+                setup.floor,
+                HUBER_K,
+                6,
+            )
         } else {
-            let f = solver::fit(model, &final_obs, &p, free, &priors);
+            let f = solver::fit_with_floor(model, &final_obs, &p, free, &priors, setup.floor);
             (f, vec![], 0)
         };
         downweighted = down;
@@ -778,7 +799,14 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let (r_min, r_max) = spheres.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
         (a.min(s.radius_mm), b.max(s.radius_mm))
     });
-    let mut limits = resolution_limits(model, &final_obs, &fit, &priors, r_min, r_max);
+    let mut limits = resolution_limits(
+        model,
+        &final_obs,
+        &fit,
+        &priors,
+        setup.floor,
+        (r_min, r_max),
+    );
     // Below a pixel: the blur σ = σ0/r is smaller than one pixel's angle on the sphere (1/R for a
     // sphere R pixels in radius) on every sphere, so the pixels' own footprint hides it.
     for c in 0..3 {
@@ -850,6 +878,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let dof = fit
         .residuals
         .saturating_sub(fit.free.iter().filter(|f| **f).count())
+        .saturating_sub(if fit.floor.is_some() { 3 } else { 0 })
         .max(1);
     let chi2 = 2.0 * fit.cost / dof as f64;
     if chi2 > CHI2_WARN {
@@ -931,7 +960,19 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         let mut hl_free = [false; N_PARAMS];
         hl_free[idx::ETA] = true;
         hl_free[idx::ALPHA] = fit.free[idx::ALPHA];
-        let hl = solver::fit(model, &pooled.kept, &fit.params, hl_free, &[]);
+        let floor = fit.floor_value();
+        let kept: Vec<Obs> = pooled
+            .kept
+            .iter()
+            .map(|o| {
+                let mut o = *o;
+                for c in 0..3 {
+                    o.radiance[c] -= floor[c];
+                }
+                o
+            })
+            .collect();
+        let hl = solver::fit(model, &kept, &fit.params, hl_free, &[]);
         let (a, b) = (hl.params.material.eta, fit.params.material.eta);
         let combined = (hl.std[idx::ETA].powi(2) + fit.std[idx::ETA].powi(2)).sqrt();
         if hl.converged && combined > 0.0 && (a - b).abs() > 3.0 * combined {
@@ -1010,13 +1051,14 @@ enum Bound {
 /// Channels whose σ0 the data cannot tell from 0 or ∞: for each channel with σ0/r_max small or
 /// σ0/r_min large, the fit is repeated (plain least squares) with that σ0 held at 10⁻⁶ mm or
 /// 10⁶ mm, and the cost compared with the free refit's in units of the residual variance.
+/// `floor`: the dark floor is fitted ([`Setup::floor`]); `radii`: the smallest and largest.
 fn resolution_limits(
     model: Model,
     obs: &[Obs],
     fit: &Fit,
     priors: &[Prior],
-    r_min: f64,
-    r_max: f64,
+    floor: bool,
+    (r_min, r_max): (f64, f64),
 ) -> Vec<(usize, Bound)> {
     let s0 = fit.params.material.sigma0_mm;
     let suspects: Vec<(usize, bool)> = (0..3)
@@ -1035,7 +1077,7 @@ fn resolution_limits(
     if suspects.is_empty() {
         return vec![];
     }
-    let free_fit = solver::fit(model, obs, &fit.params, fit.free, priors);
+    let free_fit = solver::fit_with_floor(model, obs, &fit.params, fit.free, priors, floor);
     let n = fit.free.iter().filter(|f| **f).count();
     let dof = free_fit.residuals.saturating_sub(n).max(1) as f64;
     let var = 2.0 * free_fit.cost / dof;
@@ -1049,7 +1091,7 @@ fn resolution_limits(
             p.material.sigma0_mm[c] = if small { 1e-6 } else { 1e6 };
             let mut free = fit.free;
             free[idx::SIGMA0 + c] = false;
-            let held = solver::fit(model, obs, &p, free, priors);
+            let held = solver::fit_with_floor(model, obs, &p, free, priors, floor);
             let d = 2.0 * (held.cost - free_fit.cost) / var;
             (d < RESOLVED_CHI2).then_some((
                 c,
@@ -1094,7 +1136,15 @@ pub struct Prediction {
     pub unlit_rel_rmse: f64,
 }
 
-pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> Prediction {
+/// `floor`: the dark floor still in the sphere's observations (a fitted one, [`Fit::floor`]), taken
+/// off them first.
+pub fn predict(
+    model: &Model,
+    p: &Params,
+    s: &SphereData,
+    floor: [f64; 3],
+    max_pixels: usize,
+) -> Prediction {
     use rayon::prelude::*;
     let stride = (s.obs.len() / max_pixels.max(1)).max(1);
     let l = p.light.direction();
@@ -1106,7 +1156,8 @@ pub fn predict(model: &Model, p: &Params, s: &SphereData, max_pixels: usize) -> 
             let m = model.radiance(p, &o.geometry);
             let lit = o.geometry.normal.dot(&l) > 0.0;
             let mut a = [0.0; 6];
-            for (mc, oc) in m.iter().zip(&o.radiance) {
+            for ((mc, oc), f) in m.iter().zip(&o.radiance).zip(&floor) {
+                let oc = oc - f;
                 let (d2, o2) = ((mc - oc).powi(2), oc.powi(2));
                 let k = if lit { 0 } else { 2 };
                 a[k] += d2;

@@ -14,7 +14,9 @@
 //! clipping the noise is censored and what remains averages low.
 //!
 //! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
-//! pixels away from the spheres ([`background`]) and subtracted from every sample.
+//! pixels away from the spheres ([`background`]) and subtracted from every sample; where those
+//! pixels are lit, none is measured ([`SphereData::floor`] `None`) and the joint fit fits it
+//! ([`crate::solver::fit_with_floor`]).
 
 use crate::detect::Detections;
 use crate::error::{Error, Result};

@@ -68,6 +68,7 @@ impl PaperFit {
             &predicting_model(),
             &self.params_for(s.radius_mm),
             s,
+            [0.0; 3],
             max_pixels,
         )
     }

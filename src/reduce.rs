@@ -399,6 +399,7 @@ impl Pooled {
             u: crate::solver::to_unbounded(&p.to_vec()),
             priors: vec![],
             history: None,
+            floor: false,
         };
         let idx: Vec<usize> = (0..N_PARAMS).filter(|&i| free[i]).collect();
         let none = Shift {

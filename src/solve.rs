@@ -18,6 +18,7 @@ use crate::observe::{self, SphereData};
 use crate::outline::Projection;
 use crate::paper::{self, RadiusFit};
 use crate::session::{self, LightMode, Session, SessionReport};
+use crate::solver;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -165,6 +166,13 @@ pub struct CorrelationJson {
     pub matrix: Vec<Vec<f64>>,
 }
 
+/// A dark floor fitted with the material: pixel values (full scale 1) per channel.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DarkFloorJson {
+    pub value: [f64; 3],
+    pub std: [f64; 3],
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SphereRmse {
     pub image: String,
@@ -226,6 +234,18 @@ pub struct Jackknife {
     pub json: JackknifeJson,
 }
 
+/// A sphere's data less a dark floor (radiance units), which becomes its `floor`.
+fn less_floor(s: &SphereData, floor: [f64; 3]) -> SphereData {
+    let mut s = s.clone();
+    for o in s.obs.iter_mut() {
+        for c in 0..3 {
+            o.radiance[c] -= floor[c];
+        }
+    }
+    s.floor = Some(floor);
+    s
+}
+
 /// The different radii among the spheres (mm), smallest first.
 fn distinct_radii(spheres: &[&SphereData]) -> Vec<f64> {
     let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
@@ -269,7 +289,15 @@ pub fn jackknife(
             let f = joint::fit_joint(&su, &train);
             let preds: Vec<Prediction> = test
                 .iter()
-                .map(|s| joint::predict(&f.model, &f.fit.params, s, PREDICT_PIXELS))
+                .map(|s| {
+                    joint::predict(
+                        &f.model,
+                        &f.fit.params,
+                        s,
+                        f.fit.floor_value(),
+                        PREDICT_PIXELS,
+                    )
+                })
                 .collect();
             (
                 f.fit.params,
@@ -437,6 +465,10 @@ pub struct FitFile {
     /// How far the fit moved the detector's light, in the prior's (or detector's) errors.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light_pull: Option<LightPull>,
+    /// The dark floor fitted with the material when no photo measured one (absent otherwise:
+    /// each sphere's `floor` in `rmse` is the one subtracted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_floor: Option<DarkFloorJson>,
     pub parameters: Vec<ParamJson>,
     pub correlation: CorrelationJson,
     pub rmse: RmseJson,
@@ -617,6 +649,9 @@ pub struct Loaded {
     pub frames: Option<Vec<nalgebra::Rotation3<f64>>>,
     pub highlight_radius: Option<f64>,
     pub alpha: Option<f64>,
+    /// No photo gave a dark floor (lit surroundings, none in session.json) and all share one
+    /// exposure: the floor is fitted with the material ([`Setup::floor`]).
+    pub fit_floor: bool,
     pub skipped: Vec<String>,
     pub timings: Timings,
 }
@@ -800,7 +835,15 @@ fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<
             "no usable pixels on any sphere (all saturated or on the edge)",
         ));
     }
+    // The floor is fitted when no photo measured it and one floor (in pixel values) is one
+    // constant in radiance units: the same exposure on every photo.
+    let same_exposure = report
+        .images
+        .windows(2)
+        .all(|w| w[0].exposure == w[1].exposure);
+    let fit_floor = obs.spheres.iter().all(|s| s.floor.is_none()) && same_exposure;
     Ok(Loaded {
+        fit_floor,
         report,
         detections,
         detections_path,
@@ -835,6 +878,7 @@ fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> S
         warm: None,
         light_fit: opts.light_fit,
         light_std: l.light_std,
+        floor: l.fit_floor && opts.method == Method::Joint,
     }
 }
 
@@ -897,7 +941,8 @@ pub fn choose_extensions(opts: &Options, l: &Loaded, fitted: &[&SphereData]) -> 
                 ok &= jf.fit.converged;
                 let (mut d, mut o) = (0.0, 0.0);
                 for s in test {
-                    let p = joint::predict(&jf.model, &jf.fit.params, s, 20_000);
+                    let p =
+                        joint::predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
                     d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
                     o += p.pixels as f64;
                 }
@@ -1041,9 +1086,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         v.dedup();
         v
     };
-    if !unmeasured.is_empty() {
+    // Without a measured floor the joint fit fits one (Setup::floor); where it cannot, say so.
+    let floor_fitted = l.fit_floor && opts.method == Method::Joint;
+    if !unmeasured.is_empty() && !floor_fitted {
+        let why = if opts.method == Method::Paper {
+            "the paper's procedure fits none"
+        } else if l.fit_floor {
+            "it is fitted only when every photo lacks one"
+        } else {
+            "the photos differ in exposure, so one floor would not fit them all"
+        };
         notes.push(format!(
-            "no dark floor measured for {} (the photo around the spheres is lit or covered): none subtracted, and σ0 rests on the unlit side's level, which the floor raises — a floor of 0.2% of full scale moved σ0 by 6–18% in the synthetic backdrop tests; give \"floor\" in session.json (a lens-capped photo's mean)",
+            "no dark floor measured for {} (the photo around the spheres is lit or covered) and none fitted ({why}): none subtracted, and σ0 rests on the unlit side's level, which the floor raises — a floor of 0.2% of full scale moved σ0 by 6–18% in the synthetic backdrop tests; give \"floor\" in session.json (a lens-capped photo's mean)",
             unmeasured.join(", ")
         ));
     }
@@ -1067,6 +1121,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         light_pull: Option<LightPull>,
         /// The model the parameters belong to (what predicts the photos from them).
         model: Model,
+        /// The dark floor fitted with the material (radiance units), when none was measured.
+        floor: Option<solver::Floor>,
         prior_tension: [f64; N_PARAMS],
         light_fit: String,
     }
@@ -1161,11 +1217,35 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 );
                 None
             };
-            // The paper's baseline beside it, for the figures and a comparison.
+            if let Some(fl) = jf.fit.floor {
+                let e = l.report.images.first().and_then(|i| i.exposure).unwrap_or(1.0);
+                let show = |v: [f64; 3]| {
+                    v.map(|x| format!("{:.5}", x * e)).join(", ")
+                };
+                notes.push(format!(
+                    "no dark floor measured (the photos around the spheres are lit): fitted with the material, {} ± {} of full scale (r, g, b), and subtracted before the predictions and figures",
+                    show(fl.value),
+                    show(fl.std)
+                ));
+            }
+            // The paper's baseline beside it, for the figures and a comparison (on the photos
+            // less the fitted floor, when one was fitted: the procedure assumes a measured one).
             let want = opts.baseline || opts.plots.is_some();
             if let (true, Some(light)) = (want, l.light) {
                 let t = Instant::now();
-                let pf = paper::fit(&fitted, &light, l.highlight_radius, opts.eta_prior.0);
+                let floored: Vec<SphereData> = match jf.fit.floor {
+                    Some(fl) => fitted
+                        .iter()
+                        .map(|s| less_floor(s, fl.value))
+                        .collect(),
+                    None => vec![],
+                };
+                let base: Vec<&SphereData> = if floored.is_empty() {
+                    fitted.clone()
+                } else {
+                    floored.iter().collect()
+                };
+                let pf = paper::fit(&base, &light, l.highlight_radius, opts.eta_prior.0);
                 let a = LightAngles::from_direction(&light);
                 baseline = Some(BaselineJson {
                     eta: pf.eta,
@@ -1207,6 +1287,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             }
             Outcome {
                 model: jf.model,
+                floor: jf.fit.floor,
                 params: jf.fit.params,
                 std: std::array::from_fn(|k| {
                     let spread = jack.as_ref().map_or(0.0, |j| j.std[k]);
@@ -1280,6 +1361,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             }
             Outcome {
                 model: crate::paper::predicting_model(),
+                floor: None,
                 prior_tension: [1.0; N_PARAMS],
                 params: pf.params,
                 std: pf.std,
@@ -1312,6 +1394,13 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         - l.timings.jackknife_s
         - baseline.as_ref().map_or(0.0, |b: &BaselineJson| b.seconds);
     pb.inc(1);
+    // A fitted floor comes off every sphere's pixels (the held-out one's too: the floor is the
+    // camera's), for the predictions, the figures and fit.json's per-sphere floor.
+    if let Some(fl) = outcome.floor {
+        for s in l.spheres.iter_mut() {
+            *s = less_floor(s, fl.value);
+        }
+    }
     // Predictions per sphere (the held-out one included).
     let t_hold = Instant::now();
     let model = outcome.model;
@@ -1322,7 +1411,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             let p: Prediction = match &outcome.paper {
                 Some(pf) if !is_held(s) => pf.predict(s, PREDICT_PIXELS),
                 // A held-out radius has no per-radius fit: the combined σ0 predicts it.
-                _ => joint::predict(&model, &outcome.params, s, PREDICT_PIXELS),
+                _ => joint::predict(&model, &outcome.params, s, [0.0; 3], PREDICT_PIXELS),
             };
             SphereRmse {
                 image: s.image.clone(),
@@ -1466,6 +1555,13 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         jackknife: outcome.jackknife.as_ref().map(|j| j.json.clone()),
         light_fit: outcome.light_fit.clone(),
         light_pull: outcome.light_pull,
+        dark_floor: outcome.floor.map(|f| {
+            let e = l.report.images.first().and_then(|i| i.exposure).unwrap_or(1.0);
+            DarkFloorJson {
+                value: f.value.map(|v| v * e),
+                std: f.std.map(|v| v * e),
+            }
+        }),
         parameters: (0..N_PARAMS)
             .map(|k| ParamJson {
                 name: PARAM_NAMES[k].into(),

@@ -6,6 +6,15 @@
 //! azimuth and elevation as they are, the model extensions q and b as they are, the kernel's
 //! weight as logit w = ln(w / (1 − w)) and its width ratio as ln(s − 1). Parameters not free
 //! are held at their given value; a [`Prior`] adds a residual (p − mean)/std.
+//!
+//! The photos' dark floor (a constant per channel added to every pixel: the sensor's black level
+//! and stray light) can be left unknown ([`Problem::floor`]). It enters linearly with the fixed
+//! Jacobian column w (the channel's weights), so it is profiled out exactly (variable
+//! projection): each channel's residuals and Jacobian rows lose their w-weighted projection on w,
+//! r̃ = r − w (wᵀr)/(wᵀw) and J̃ = J − w (wᵀJ)/(wᵀw). The fit of the other parameters and their
+//! covariance (J̃ᵀJ̃ is the Schur complement of the floor in the full information matrix) are then
+//! those of the fit with the floor free; the floor itself is −(wᵀr)/(wᵀw) (docs/solve.md, "The
+//! dark floor").
 
 use crate::model::{idx, Geometry, Model, Params, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -90,6 +99,53 @@ pub struct Problem<'a> {
     pub priors: Vec<Prior>,
     /// When set, the cost ½Σr² of every residual evaluation (trial steps included) is recorded.
     pub history: Option<std::sync::Mutex<Vec<f64>>>,
+    /// The observations carry an unknown dark floor per channel (profiled out; module doc).
+    pub floor: bool,
+}
+
+/// The dark floor per channel as profiled out of a fit: its value (the observations' units) and
+/// standard error.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Floor {
+    pub value: [f64; 3],
+    pub std: [f64; 3],
+}
+
+/// Per channel: Σw², Σw·r and Σw·g (g the weighted Jacobian row) over the observation rows.
+#[derive(Clone, Debug)]
+struct FloorSums {
+    ww: [f64; 3],
+    wr: [f64; 3],
+    wg: [DVector<f64>; 3],
+}
+
+impl FloorSums {
+    fn zero(n: usize) -> FloorSums {
+        FloorSums {
+            ww: [0.0; 3],
+            wr: [0.0; 3],
+            wg: std::array::from_fn(|_| DVector::zeros(n)),
+        }
+    }
+
+    fn add(mut self, o: &FloorSums) -> FloorSums {
+        for c in 0..3 {
+            self.ww[c] += o.ww[c];
+            self.wr[c] += o.wr[c];
+            self.wg[c] += &o.wg[c];
+        }
+        self
+    }
+
+    /// The floor that minimises the cost, and its Jacobian row (with respect to the free
+    /// parameters) per channel: f = −(wᵀr)/(wᵀw), ∂f = −(wᵀJ)/(wᵀw).
+    fn solve(&self) -> ([f64; 3], [DVector<f64>; 3]) {
+        let inv = self.ww.map(|w| if w > 0.0 { 1.0 / w } else { 0.0 });
+        (
+            [0, 1, 2].map(|c| -self.wr[c] * inv[c]),
+            std::array::from_fn(|c| -&self.wg[c] * inv[c]),
+        )
+    }
 }
 
 impl Problem<'_> {
@@ -126,6 +182,39 @@ impl Problem<'_> {
                 (r, j)
             })
             .collect();
+        // The floor profiled out: each channel's rows lose their projection on its weights.
+        let rows = if self.floor {
+            let mut sums = FloorSums::zero(n);
+            for ((r, j), o) in rows.iter().zip(self.obs) {
+                for c in 0..3 {
+                    let w = o.weight[c];
+                    sums.ww[c] += w * w;
+                    sums.wr[c] += w * r[c];
+                    if want_jacobian {
+                        for i in 0..n {
+                            sums.wg[c][i] += w * j[c * n + i];
+                        }
+                    }
+                }
+            }
+            let (f, df) = sums.solve();
+            rows.into_iter()
+                .zip(self.obs)
+                .map(|((mut r, mut j), o)| {
+                    for c in 0..3 {
+                        r[c] += o.weight[c] * f[c];
+                        if want_jacobian {
+                            for i in 0..n {
+                                j[c * n + i] += o.weight[c] * df[c][i];
+                            }
+                        }
+                    }
+                    (r, j)
+                })
+                .collect()
+        } else {
+            rows
+        };
         let priors: Vec<&Prior> = self.priors.iter().filter(|q| self.free[q.index]).collect();
         let m = 3 * self.obs.len() + priors.len();
         let prior_res = priors.iter().map(|q| (p[q.index] - q.mean) / q.std);
@@ -158,6 +247,15 @@ impl Problem<'_> {
     /// the observation rows (the prior rows are already in units of their σ); and the cost
     /// ½Σr² of the observations.
     pub fn covariance(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64) {
+        let (std, correlation, cost, _) = self.covariance_and_floor();
+        (std, correlation, cost)
+    }
+
+    /// [`Self::covariance`], and the dark floor when it is profiled out: its value
+    /// f = −(wᵀr)/(wᵀw) per channel and its standard error from σ²/(wᵀw) + ḡᵀCḡ, with
+    /// ḡ = (wᵀJ)/(wᵀw) and C the other parameters' covariance (the two parts are uncorrelated:
+    /// the parameters are fitted to residuals orthogonal to w).
+    pub fn covariance_and_floor(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64, Option<Floor>) {
         let dpdu = from_unbounded(&self.u).1;
         let idx = self.free_idx();
         let n = idx.len();
@@ -170,11 +268,30 @@ impl Problem<'_> {
         }
         let ne = self.normal_equations();
         let cost = 0.5 * ne.rtr_obs;
-        let sigma2 = (2.0 * cost / (m_obs.saturating_sub(n).max(1)) as f64).max(1e-300);
+        let fitted = n + if self.floor { 3 } else { 0 };
+        let sigma2 = (2.0 * cost / (m_obs.saturating_sub(fitted).max(1)) as f64).max(1e-300);
         let info = (&ne.jtj - &prior_part) / sigma2 + &prior_part;
         let mut std = [0.0; N_PARAMS];
         let mut correlation = DMatrix::zeros(n, n);
-        if let Some(cov) = ne.finite.then(|| info.try_inverse()).flatten() {
+        let cov = ne.finite.then(|| info.try_inverse()).flatten();
+        let floor = self.floor.then(|| {
+            let sums = self.floor_sums();
+            let (value, _) = sums.solve();
+            let std = [0, 1, 2].map(|c| {
+                if sums.ww[c] <= 0.0 {
+                    return f64::INFINITY;
+                }
+                let g = &sums.wg[c] / sums.ww[c];
+                let spread = match &cov {
+                    Some(cv) => (g.transpose() * cv * &g)[(0, 0)],
+                    None if n == 0 => 0.0,
+                    None => f64::INFINITY,
+                };
+                (sigma2 / sums.ww[c] + spread.max(0.0)).sqrt()
+            });
+            Floor { value, std }
+        });
+        if let Some(cov) = cov {
             for (a, &k) in idx.iter().enumerate() {
                 // Unbounded → physical: σ_p = |dp/du| σ_u.
                 std[k] = cov[(a, a)].max(0.0).sqrt() * dpdu[k].abs();
@@ -187,7 +304,35 @@ impl Problem<'_> {
                 std[k] = f64::INFINITY;
             }
         }
-        (std, correlation, cost)
+        (std, correlation, cost, floor)
+    }
+
+    /// Per channel Σw², Σw·r and Σw·J over the observations, r and J without the floor.
+    fn floor_sums(&self) -> FloorSums {
+        let (p, dpdu) = from_unbounded(&self.u);
+        let params = Params::from_vec(&p);
+        let free = self.free_idx();
+        let n = free.len();
+        self.obs
+            .par_chunks(2048)
+            .map(|chunk| {
+                let mut fs = FloorSums::zero(n);
+                for o in chunk {
+                    let (l, grad) = self.model.radiance_with_gradient(&params, &o.geometry);
+                    for c in 0..3 {
+                        let w = o.weight[c];
+                        fs.ww[c] += w * w;
+                        fs.wr[c] += w * w * (l[c] - o.radiance[c]);
+                        for (i, &k) in free.iter().enumerate() {
+                            fs.wg[c][i] += w * w * grad[c][k] * dpdu[k];
+                        }
+                    }
+                }
+                fs
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(FloorSums::zero(n), |a, b| a.add(&b))
     }
 }
 
@@ -209,18 +354,20 @@ impl Problem<'_> {
         let params = Params::from_vec(&p);
         let free = self.free_idx();
         let n = free.len();
+        let floor = self.floor;
         let zero = || {
             (
                 DMatrix::<f64>::zeros(n, n),
                 DVector::<f64>::zeros(n),
                 0.0f64,
+                FloorSums::zero(if floor { n } else { 0 }),
             )
         };
-        let (mut jtj, mut jtr, rtr) = self
+        let (mut jtj, mut jtr, mut rtr, sums) = self
             .obs
             .par_chunks(2048)
             .map(|chunk| {
-                let (mut a, mut b, mut c) = zero();
+                let (mut a, mut b, mut c, mut fs) = zero();
                 let mut g = vec![0.0; n];
                 for o in chunk {
                     let (l, grad) = self.model.radiance_with_gradient(&params, &o.geometry);
@@ -240,20 +387,39 @@ impl Problem<'_> {
                             }
                         }
                         c += r * r;
+                        if floor {
+                            fs.ww[ch] += w * w;
+                            fs.wr[ch] += w * r;
+                            for i in 0..n {
+                                fs.wg[ch][i] += w * g[i];
+                            }
+                        }
                     }
                 }
-                (a, b, c)
+                (a, b, c, fs)
             })
             .collect::<Vec<_>>()
             .into_iter()
             // Summed in chunk order: the same result on every run.
-            .fold(zero(), |(a1, b1, c1), (a2, b2, c2)| {
-                (a1 + a2, b1 + b2, c1 + c2)
+            .fold(zero(), |(a1, b1, c1, f1), (a2, b2, c2, f2)| {
+                (a1 + a2, b1 + b2, c1 + c2, f1.add(&f2))
             });
         for i in 0..n {
             for j in 0..i {
                 jtj[(j, i)] = jtj[(i, j)];
             }
+        }
+        // The floor profiled out (module doc): the projections on each channel's weights removed.
+        if floor {
+            for c in 0..3 {
+                if sums.ww[c] > 0.0 {
+                    let inv = 1.0 / sums.ww[c];
+                    jtj -= &sums.wg[c] * sums.wg[c].transpose() * inv;
+                    jtr -= &sums.wg[c] * (sums.wr[c] * inv);
+                    rtr -= sums.wr[c] * sums.wr[c] * inv;
+                }
+            }
+            rtr = rtr.max(0.0);
         }
         let mut rtr_prior = 0.0;
         for q in self.priors.iter().filter(|q| self.free[q.index]) {
@@ -424,6 +590,15 @@ pub struct Fit {
     pub converged: bool,
     /// Cost at every residual evaluation, trial steps included.
     pub history: Vec<f64>,
+    /// The dark floor, when it was profiled out ([`fit_with_floor`]).
+    pub floor: Option<Floor>,
+}
+
+impl Fit {
+    /// The floor to add to the model's radiance to predict the observations (0 when known).
+    pub fn floor_value(&self) -> [f64; 3] {
+        self.floor.map_or([0.0; 3], |f| f.value)
+    }
 }
 
 /// Fit the free parameters from `start` (with priors on some of them).
@@ -434,6 +609,19 @@ pub fn fit(
     free: [bool; N_PARAMS],
     priors: &[Prior],
 ) -> Fit {
+    fit_with_floor(model, obs, start, free, priors, false)
+}
+
+/// [`fit`], with the observations' dark floor unknown when `floor` is set (profiled out; module
+/// doc): [`Fit::floor`] then holds it.
+pub fn fit_with_floor(
+    model: Model,
+    obs: &[Obs],
+    start: &Params,
+    free: [bool; N_PARAMS],
+    priors: &[Prior],
+    floor: bool,
+) -> Fit {
     let problem = Problem {
         model,
         obs,
@@ -441,13 +629,14 @@ pub fn fit(
         u: to_unbounded(&start.to_vec()),
         priors: priors.to_vec(),
         history: Some(std::sync::Mutex::new(vec![])),
+        floor,
     };
     let (reduced, report) = LevenbergMarquardt::new()
         .with_patience(200)
         .minimize(Reduced::new(problem));
     let problem = reduced.problem;
     let p = from_unbounded(&problem.u).0;
-    let (std, correlation, cost) = problem.covariance();
+    let (std, correlation, cost, floor) = problem.covariance_and_floor();
     let m_obs = 3 * obs.len();
     let history = problem
         .history
@@ -465,27 +654,41 @@ pub fn fit(
         termination: format!("{:?}", report.termination),
         converged: report.termination.was_successful() && finite,
         history,
+        floor,
     }
 }
 
 /// Robust weights of the Huber loss: residuals scaled by a robust σ (1.4826 × their median
 /// absolute value); those beyond `k` σ get weight k/|r| (its square root multiplies the channel
 /// weight). Returns the reweighted observations, how many channel residuals were down-weighted,
-/// and whether any weight moved by more than 1% from `current`.
+/// and whether any weight moved by more than 1% from `current`. `floor`: the fit's dark floor
+/// (added to the model), 0 when it is known.
 pub fn huber_weights(
     model: &Model,
     obs: &[Obs],
     current: &[Obs],
     p: &Params,
+    floor: [f64; 3],
     k: f64,
 ) -> (Vec<Obs>, usize, bool) {
+    let shifted: Vec<Obs> = obs
+        .iter()
+        .map(|o| {
+            let mut o = *o;
+            for c in 0..3 {
+                o.radiance[c] -= floor[c];
+            }
+            o
+        })
+        .collect();
     let probe = Problem {
         model: *model,
-        obs,
+        obs: &shifted,
         free: [false; N_PARAMS],
         u: to_unbounded(&p.to_vec()),
         priors: vec![],
         history: None,
+        floor: false,
     };
     let (res, _) = probe.evaluate(false);
     let mut abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
@@ -523,21 +726,25 @@ pub fn huber_weights(
 /// A fit with the Huber loss, by iteratively reweighted least squares around [`fit`]
 /// ([`huber_weights`]), repeated from its own result until no weight changes by more than 1%
 /// (at most `rounds` times). Returns the final fit, the observations with their final weights
-/// and the number of down-weighted channel residuals.
+/// and the number of down-weighted channel residuals. `floor`: as in [`fit_with_floor`].
+#[allow(clippy::too_many_arguments)]
 pub fn fit_robust(
     model: Model,
     obs: &[Obs],
     start: &Params,
     free: [bool; N_PARAMS],
     priors: &[Prior],
+    floor: bool,
     k: f64,
     rounds: usize,
 ) -> (Fit, Vec<Obs>, usize) {
+    let fit = |o: &[Obs], p: &Params| fit_with_floor(model, o, p, free, priors, floor);
     let mut current: Vec<Obs> = obs.to_vec();
-    let mut f = fit(model, &current, start, free, priors);
+    let mut f = fit(&current, start);
     let mut down = 0;
     for _ in 0..rounds {
-        let (next, d, changed) = huber_weights(&model, obs, &current, &f.params, k);
+        let (next, d, changed) =
+            huber_weights(&model, obs, &current, &f.params, f.floor_value(), k);
         down = d;
         current = next;
         if !changed {
@@ -545,7 +752,7 @@ pub fn fit_robust(
         }
         let mut history = std::mem::take(&mut f.history);
         let evaluations = f.evaluations;
-        f = fit(model, &current, &f.params, free, priors);
+        f = fit(&current, &f.params);
         history.extend(&f.history);
         f.history = history;
         f.evaluations += evaluations;

@@ -427,8 +427,9 @@ fn clipped_highlights_are_fitted_and_refined() {
 }
 
 /// Spheres before a grey card (8–22% of full scale, a gradient), resting on a lit table with
-/// their shadows, and held up on a pin before the card: outlines and light as on black, and σ0 as on black once the dark floor is given
-/// (a lit backdrop leaves it unmeasured, which the solve says).
+/// their shadows, and held up on a pin before the card: outlines and light as on black; the dark
+/// floor, which a lit backdrop leaves unmeasured, fitted with the material (and said), σ0 as on
+/// black with it fitted and with it given.
 #[test]
 fn grey_backdrop_and_table() {
     use workbench::synth::session::Backdrop;
@@ -478,14 +479,40 @@ fn grey_backdrop_and_table() {
         // Measured 0.032° ± 0.034° (grey), 0.054° ± 0.034° (table). The solve's light below
         // meets the 0.05° goal on both.
         assert!(dl < 3.0 * std, "{backdrop}: {dl}° ± {std}°");
-        // Without the floor: none subtracted, and said.
+        // Without the floor: fitted with the material, and said.
         let f = solve(dir.path());
         assert!(
             f.notes.iter().any(|n| n.contains("no dark floor measured")),
             "{:?}",
             f.notes
         );
-        // With it (truth's ambient), σ0 as on black.
+        let fl = f.dark_floor.expect("the floor is fitted");
+        let sigma0_off = |f: &workbench::solve::FitFile| {
+            (0..3)
+                .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
+                .fold(0.0, f64::max)
+        };
+        let dl = Vector3::from(f.light_direction)
+            .angle(&Vector3::from(t.light_direction))
+            .to_degrees();
+        println!(
+            "{backdrop}, floor fitted: {:?} ± {:?} (truth {}), light {dl:.4}°, σ0 {:?}: {:.2}% from black",
+            fl.value,
+            fl.std,
+            t.render.ambient,
+            f.sigma0_mm,
+            100.0 * sigma0_off(&f)
+        );
+        for c in 0..3 {
+            // Measured ≤ 6.8e-6 (2.3 of its std) for the truth's 2e-3.
+            let e = fl.value[c] - t.render.ambient;
+            println!("{backdrop} channel {c}: floor off by {e:.2e}, {:.1} std", e / fl.std[c]);
+            assert!(e.abs() < 2e-5, "{backdrop} channel {c}: floor off by {e}");
+        }
+        // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.32% from black; the goals 0.05° and 0.5%.
+        assert!(dl < 0.05, "{backdrop}: {dl}°");
+        assert!(sigma0_off(&f) < 0.005, "{backdrop}: {}", sigma0_off(&f));
+        // With it given (truth's ambient), σ0 as on black.
         let p = dir.path().join("session.json");
         let mut s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
@@ -497,9 +524,8 @@ fn grey_backdrop_and_table() {
             .to_degrees();
         println!("{backdrop}: solved light {dl:.4}°");
         assert!(dl < 0.05, "{backdrop}: {dl}°");
-        let worst = (0..3)
-            .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
-            .fold(0.0, f64::max);
+        assert!(f.dark_floor.is_none());
+        let worst = sigma0_off(&f);
         println!(
             "{backdrop}: σ0 {:?} vs black {:?}: {:.2}%",
             f.sigma0_mm,

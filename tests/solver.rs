@@ -119,6 +119,7 @@ fn jacobian_matches_finite_differences() {
         u: to_unbounded(&p.to_vec()),
         priors: priors.clone(),
         history: None,
+        floor: false,
     };
     let (_, j) = base.evaluate(true);
     assert_eq!(j.as_ref().unwrap().nrows(), 3 * obs.len() + 1);
@@ -134,6 +135,7 @@ fn jacobian_matches_finite_differences() {
                         u: base.u,
                         priors: priors.clone(),
                         history: None,
+                        floor: false,
                     };
                     q.u[k] = t;
                     q.evaluate(false).0[row]
@@ -217,7 +219,7 @@ fn huber_reweighting_ignores_a_few_bad_pixels() {
     let free = plain_free();
     let plain = solver::fit(Model::default(), &obs, &p, free, &[]);
     let (robust, weights, down) =
-        solver::fit_robust(Model::default(), &obs, &p, free, &[], 1.345, 8);
+        solver::fit_robust(Model::default(), &obs, &p, free, &[], false, 1.345, 8);
     assert!(down >= 3 * (obs.len() / 33), "{down} down-weighted");
     let err = |f: &solver::Fit| {
         (0..6)
@@ -336,4 +338,126 @@ fn a_prior_combines_with_the_data_as_two_gaussians_do() {
         (both.std[idx::ETA] / std - 1.0).abs() < 0.1,
         "posterior std"
     );
+}
+
+/// The observations with a dark floor added to each channel.
+fn with_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
+    obs.iter()
+        .map(|o| {
+            let mut o = *o;
+            for c in 0..3 {
+                o.radiance[c] += floor[c];
+            }
+            o
+        })
+        .collect()
+}
+
+#[test]
+fn floor_profiled_out_jacobian_matches_differences_and_the_normal_equations() {
+    let p = truth();
+    let mut obs = with_floor(
+        &observations(&p, &[30.0, 15.0], 40, 0.01, 3),
+        [0.01, 0.02, 0.005],
+    );
+    // Unequal weights, so that the projection on them is exercised.
+    for (i, o) in obs.iter_mut().enumerate() {
+        o.weight = [1.0 + (i % 5) as f64, 2.0 - 0.1 * (i % 7) as f64, 0.5 + (i % 3) as f64];
+    }
+    let free = plain_free();
+    let mut start = p;
+    start.material.sigma0_mm = [5.0, 3.5, 2.0];
+    let problem = |u: [f64; N_PARAMS]| Problem {
+        model: Model::default(),
+        obs: &obs,
+        free,
+        u,
+        priors: vec![],
+        history: None,
+        floor: true,
+    };
+    let base = problem(to_unbounded(&start.to_vec()));
+    let (r, j) = base.evaluate(true);
+    let j = j.unwrap();
+    let cols: Vec<usize> = (0..N_PARAMS).filter(|&k| free[k]).collect();
+    assert_eq!(j.ncols(), cols.len());
+    for (a, &k) in cols.iter().enumerate() {
+        for row in (0..j.nrows()).step_by(5) {
+            let fd = common::derivative(
+                &|t: f64| {
+                    let mut u = base.u;
+                    u[k] = t;
+                    problem(u).evaluate(false).0[row]
+                },
+                base.u[k],
+                1e-4,
+            );
+            assert!(
+                (fd - j[(row, a)]).abs() < 1e-6 * (1.0 + j[(row, a)].abs()),
+                "param {k} row {row}: {fd} vs {}",
+                j[(row, a)]
+            );
+        }
+    }
+    // The normal equations (accumulated without forming J) agree with J̃ᵀJ̃, J̃ᵀr̃ and r̃ᵀr̃.
+    let ne = base.normal_equations();
+    let (jtj, jtr) = (j.transpose() * &j, j.transpose() * &r);
+    let scale = jtj.amax();
+    assert!((&ne.jtj - &jtj).amax() < 1e-10 * scale, "JᵀJ");
+    assert!((&ne.jtr - &jtr).amax() < 1e-10 * jtr.amax().max(1e-300), "Jᵀr");
+    assert!((ne.rtr_obs - r.norm_squared()).abs() < 1e-10 * r.norm_squared());
+    // Each channel's residuals are orthogonal to its weights (the floor took their projection).
+    for c in 0..3 {
+        let wr: f64 = obs.iter().enumerate().map(|(i, o)| o.weight[c] * r[3 * i + c]).sum();
+        assert!(wr.abs() < 1e-10 * r.amax(), "channel {c}: wᵀr̃ = {wr}");
+    }
+}
+
+#[test]
+fn a_dark_floor_is_fitted_with_the_material() {
+    let p = truth();
+    let floor = [0.004, 0.003, 0.002];
+    let free = plain_free();
+    let mut errs = vec![];
+    for seed in 0..8 {
+        let obs = with_floor(
+            &observations(&p, &[35.0, 25.0, 15.0], 3000, 0.01, 100 + seed),
+            floor,
+        );
+        let f = solver::fit_with_floor(Model::default(), &obs, &p, free, &[], true);
+        assert!(f.converged, "{}", f.termination);
+        let fl = f.floor.expect("the floor is fitted");
+        for c in 0..3 {
+            let e = fl.value[c] - floor[c];
+            errs.push(e / fl.std[c]);
+            let s = (f.params.material.sigma0_mm[c] - p.material.sigma0_mm[c]) / f.std[c];
+            errs.push(s);
+            if seed == 0 {
+                println!(
+                    "channel {c}: floor {:.5} ± {:.5} (truth {}), σ0 {:.4} ± {:.4} (truth {})",
+                    fl.value[c],
+                    fl.std[c],
+                    floor[c],
+                    f.params.material.sigma0_mm[c],
+                    f.std[c],
+                    p.material.sigma0_mm[c]
+                );
+            }
+        }
+        if seed == 0 {
+            // Without the floor the same data give a σ0 many standard errors off.
+            let plain = solver::fit(Model::default(), &obs, &p, free, &[]);
+            for c in 0..3 {
+                let off = (plain.params.material.sigma0_mm[c] - p.material.sigma0_mm[c])
+                    / f.std[c];
+                println!("channel {c}: σ0 without the floor {off:.1} of the floor fit's std off");
+                assert!(off.abs() > 5.0, "channel {c}: the floor should matter ({off:.1})");
+            }
+        }
+    }
+    // The stated errors describe the scatter: the mean squared pull of the floor and σ0 is about 1.
+    let chi2 = errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64;
+    println!("mean squared pull over {} values: {chi2:.2}", errs.len());
+    assert!((0.4..2.0).contains(&chi2), "{chi2}");
+    assert!(errs.iter().all(|e| e.abs() < 4.0), "{errs:?}");
 }
