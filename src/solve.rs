@@ -1218,10 +1218,13 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 None
             };
             if let Some(fl) = jf.fit.floor {
-                let e = l.report.images.first().and_then(|i| i.exposure).unwrap_or(1.0);
-                let show = |v: [f64; 3]| {
-                    v.map(|x| format!("{:.5}", x * e)).join(", ")
-                };
+                let e = l
+                    .report
+                    .images
+                    .first()
+                    .and_then(|i| i.exposure)
+                    .unwrap_or(1.0);
+                let show = |v: [f64; 3]| v.map(|x| format!("{:.5}", x * e)).join(", ");
                 notes.push(format!(
                     "no dark floor measured (the photos around the spheres are lit): fitted with the material, {} ± {} of full scale (r, g, b), and subtracted before the predictions and figures",
                     show(fl.value),
@@ -1234,10 +1237,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
             if let (true, Some(light)) = (want, l.light) {
                 let t = Instant::now();
                 let floored: Vec<SphereData> = match jf.fit.floor {
-                    Some(fl) => fitted
-                        .iter()
-                        .map(|s| less_floor(s, fl.value))
-                        .collect(),
+                    Some(fl) => fitted.iter().map(|s| less_floor(s, fl.value)).collect(),
                     None => vec![],
                 };
                 let base: Vec<&SphereData> = if floored.is_empty() {
@@ -1556,7 +1556,12 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         light_fit: outcome.light_fit.clone(),
         light_pull: outcome.light_pull,
         dark_floor: outcome.floor.map(|f| {
-            let e = l.report.images.first().and_then(|i| i.exposure).unwrap_or(1.0);
+            let e = l
+                .report
+                .images
+                .first()
+                .and_then(|i| i.exposure)
+                .unwrap_or(1.0);
             DarkFloorJson {
                 value: f.value.map(|v| v * e),
                 std: f.std.map(|v| v * e),

@@ -506,7 +506,10 @@ fn grey_backdrop_and_table() {
         for c in 0..3 {
             // Measured ≤ 6.8e-6 (2.3 of its std) for the truth's 2e-3.
             let e = fl.value[c] - t.render.ambient;
-            println!("{backdrop} channel {c}: floor off by {e:.2e}, {:.1} std", e / fl.std[c]);
+            println!(
+                "{backdrop} channel {c}: floor off by {e:.2e}, {:.1} std",
+                e / fl.std[c]
+            );
             assert!(e.abs() < 2e-5, "{backdrop} channel {c}: floor off by {e}");
         }
         // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.32% from black; the goals 0.05° and 0.5%.

@@ -362,7 +362,11 @@ fn floor_profiled_out_jacobian_matches_differences_and_the_normal_equations() {
     );
     // Unequal weights, so that the projection on them is exercised.
     for (i, o) in obs.iter_mut().enumerate() {
-        o.weight = [1.0 + (i % 5) as f64, 2.0 - 0.1 * (i % 7) as f64, 0.5 + (i % 3) as f64];
+        o.weight = [
+            1.0 + (i % 5) as f64,
+            2.0 - 0.1 * (i % 7) as f64,
+            0.5 + (i % 3) as f64,
+        ];
     }
     let free = plain_free();
     let mut start = p;
@@ -404,11 +408,18 @@ fn floor_profiled_out_jacobian_matches_differences_and_the_normal_equations() {
     let (jtj, jtr) = (j.transpose() * &j, j.transpose() * &r);
     let scale = jtj.amax();
     assert!((&ne.jtj - &jtj).amax() < 1e-10 * scale, "JᵀJ");
-    assert!((&ne.jtr - &jtr).amax() < 1e-10 * jtr.amax().max(1e-300), "Jᵀr");
+    assert!(
+        (&ne.jtr - &jtr).amax() < 1e-10 * jtr.amax().max(1e-300),
+        "Jᵀr"
+    );
     assert!((ne.rtr_obs - r.norm_squared()).abs() < 1e-10 * r.norm_squared());
     // Each channel's residuals are orthogonal to its weights (the floor took their projection).
     for c in 0..3 {
-        let wr: f64 = obs.iter().enumerate().map(|(i, o)| o.weight[c] * r[3 * i + c]).sum();
+        let wr: f64 = obs
+            .iter()
+            .enumerate()
+            .map(|(i, o)| o.weight[c] * r[3 * i + c])
+            .sum();
         assert!(wr.abs() < 1e-10 * r.amax(), "channel {c}: wᵀr̃ = {wr}");
     }
 }
@@ -448,10 +459,12 @@ fn a_dark_floor_is_fitted_with_the_material() {
             // Without the floor the same data give a σ0 many standard errors off.
             let plain = solver::fit(Model::default(), &obs, &p, free, &[]);
             for c in 0..3 {
-                let off = (plain.params.material.sigma0_mm[c] - p.material.sigma0_mm[c])
-                    / f.std[c];
+                let off = (plain.params.material.sigma0_mm[c] - p.material.sigma0_mm[c]) / f.std[c];
                 println!("channel {c}: σ0 without the floor {off:.1} of the floor fit's std off");
-                assert!(off.abs() > 5.0, "channel {c}: the floor should matter ({off:.1})");
+                assert!(
+                    off.abs() > 5.0,
+                    "channel {c}: the floor should matter ({off:.1})"
+                );
             }
         }
     }
