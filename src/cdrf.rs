@@ -533,7 +533,7 @@ mod tests {
     /// Every derivative of a blurred series with several harmonics against central differences.
     #[test]
     fn series_derivatives_match_finite_differences() {
-        let a = vec![0.1, 0.7, -0.2, 0.05, 0.3, -0.04];
+        let a = [0.1, 0.7, -0.2, 0.05, 0.3, -0.04];
         let da = vec![0.3, -0.1, 0.2, 0.4, -0.5, 0.1];
         let at = |p: f64| {
             Series::new(

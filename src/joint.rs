@@ -960,18 +960,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         let mut hl_free = [false; N_PARAMS];
         hl_free[idx::ETA] = true;
         hl_free[idx::ALPHA] = fit.free[idx::ALPHA];
-        let floor = fit.floor_value();
-        let kept: Vec<Obs> = pooled
-            .kept
-            .iter()
-            .map(|o| {
-                let mut o = *o;
-                for c in 0..3 {
-                    o.radiance[c] -= floor[c];
-                }
-                o
-            })
-            .collect();
+        let kept = solver::less_floor(&pooled.kept, fit.floor_value());
         let hl = solver::fit(model, &kept, &fit.params, hl_free, &[]);
         let (a, b) = (hl.params.material.eta, fit.params.material.eta);
         let combined = (hl.std[idx::ETA].powi(2) + fit.std[idx::ETA].powi(2)).sqrt();

@@ -236,14 +236,11 @@ pub struct Jackknife {
 
 /// A sphere's data less a dark floor (radiance units), which becomes its `floor`.
 fn less_floor(s: &SphereData, floor: [f64; 3]) -> SphereData {
-    let mut s = s.clone();
-    for o in s.obs.iter_mut() {
-        for c in 0..3 {
-            o.radiance[c] -= floor[c];
-        }
+    SphereData {
+        obs: solver::less_floor(&s.obs, floor),
+        floor: Some(floor),
+        ..s.clone()
     }
-    s.floor = Some(floor);
-    s
 }
 
 /// The different radii among the spheres (mm), smallest first.

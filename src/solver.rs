@@ -390,8 +390,8 @@ impl Problem<'_> {
                         if floor {
                             fs.ww[ch] += w * w;
                             fs.wr[ch] += w * r;
-                            for i in 0..n {
-                                fs.wg[ch][i] += w * g[i];
+                            for (s, gi) in fs.wg[ch].iter_mut().zip(&g) {
+                                *s += w * gi;
                             }
                         }
                     }
@@ -594,6 +594,19 @@ pub struct Fit {
     pub floor: Option<Floor>,
 }
 
+/// The observations less a dark floor per channel (the observations' units).
+pub fn less_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
+    obs.iter()
+        .map(|o| {
+            let mut o = *o;
+            for (v, f) in o.radiance.iter_mut().zip(&floor) {
+                *v -= f;
+            }
+            o
+        })
+        .collect()
+}
+
 impl Fit {
     /// The floor to add to the model's radiance to predict the observations (0 when known).
     pub fn floor_value(&self) -> [f64; 3] {
@@ -671,16 +684,7 @@ pub fn huber_weights(
     floor: [f64; 3],
     k: f64,
 ) -> (Vec<Obs>, usize, bool) {
-    let shifted: Vec<Obs> = obs
-        .iter()
-        .map(|o| {
-            let mut o = *o;
-            for c in 0..3 {
-                o.radiance[c] -= floor[c];
-            }
-            o
-        })
-        .collect();
+    let shifted = less_floor(obs, floor);
     let probe = Problem {
         model: *model,
         obs: &shifted,

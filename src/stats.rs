@@ -54,6 +54,16 @@ pub fn t_quantile_central(p: f64, dof: u32) -> f64 {
 /// P(|Z| ≤ 2) for a standard normal Z: the coverage of ±2 standard errors.
 pub const TWO_SIGMA: f64 = 0.954_499_736_103_642;
 
+/// The q-quantile (0 ≤ q ≤ 1) of the finite values, the nearest rank; NaN when there are none.
+pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,14 +87,4 @@ mod tests {
         // Large ν: the normal's ±2σ.
         assert!((t_quantile_central(TWO_SIGMA, 400) - 2.0).abs() < 0.01);
     }
-}
-
-/// The q-quantile (0 ≤ q ≤ 1) of the finite values, the nearest rank; NaN when there are none.
-pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let k = ((v.len() - 1) as f64 * q).round() as usize;
-    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }

@@ -345,8 +345,8 @@ fn with_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
     obs.iter()
         .map(|o| {
             let mut o = *o;
-            for c in 0..3 {
-                o.radiance[c] += floor[c];
+            for (v, f) in o.radiance.iter_mut().zip(&floor) {
+                *v += f;
             }
             o
         })
@@ -438,8 +438,8 @@ fn a_dark_floor_is_fitted_with_the_material() {
         let f = solver::fit_with_floor(Model::default(), &obs, &p, free, &[], true);
         assert!(f.converged, "{}", f.termination);
         let fl = f.floor.expect("the floor is fitted");
-        for c in 0..3 {
-            let e = fl.value[c] - floor[c];
+        for (c, truth) in floor.iter().enumerate() {
+            let e = fl.value[c] - truth;
             errs.push(e / fl.std[c]);
             let s = (f.params.material.sigma0_mm[c] - p.material.sigma0_mm[c]) / f.std[c];
             errs.push(s);

@@ -361,12 +361,12 @@ fn check(cfg: &PbrConfig) -> Result<()> {
         return bad("give at least one radius, every one positive");
     }
     let m = &cfg.medium;
-    if !(m.sigma_t > 0.0 && m.sigma_t.is_finite())
-        || !m.albedo.iter().all(|a| (0.0..1.0).contains(a))
-    {
+    let valid =
+        m.sigma_t > 0.0 && m.sigma_t.is_finite() && m.albedo.iter().all(|a| (0.0..1.0).contains(a));
+    if !valid {
         return bad("medium: σt must be positive and every albedo in [0, 1)");
     }
-    if !(cfg.eta > 1.0 && cfg.eta < 4.0) || !(cfg.alpha >= 0.001 && cfg.alpha <= 1.0) {
+    if !(cfg.eta > 1.0 && cfg.eta < 4.0 && cfg.alpha >= 0.001 && cfg.alpha <= 1.0) {
         return bad("boundary: η must lie in (1, 4) and α in [0.001, 1]");
     }
     if cfg.spp < 2 {
