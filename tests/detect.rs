@@ -366,7 +366,9 @@ fn diligent_ball_lights() {
 /// stated error covers the light's, and the solve, given that honest prior, refines the light.
 #[test]
 fn clipped_highlights_are_fitted_and_refined() {
-    for (alpha, ks) in [(0.1, 40.0), (0.15, 30.0), (0.15, 300.0)] {
+    // 6%, 7%, 22% and 29% of each disc clipped; the last is the rough sphere (α 0.25) that was
+    // refused on every sphere before the fit's patch held the ring around the clipped core.
+    for (alpha, ks) in [(0.1, 40.0), (0.15, 30.0), (0.15, 300.0), (0.25, 300.0)] {
         let dir = tempfile::tempdir().unwrap();
         let cfg = SessionConfig {
             radii_mm: vec![35.0, 25.0, 15.0],
@@ -400,7 +402,8 @@ fn clipped_highlights_are_fitted_and_refined() {
             );
             assert!((0.05..0.30).contains(&clipped), "{clipped}");
             assert_eq!(h.method, workbench::highlight::Method::LobeFit);
-            // The roughness from the ring alone: measured within 15% up to 10% clipped, 40–55% at 22%.
+            // The roughness from the ring alone: measured within 15% up to 10% clipped, within
+            // 45% at 22% and 31% at 29%.
             let tol = if clipped < 0.1 { 0.25 } else { 0.6 };
             assert!(
                 (h.alpha.unwrap() / alpha - 1.0).abs() < tol,
