@@ -8,7 +8,7 @@
 //!
 //! Prints Markdown tables.
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/it/common/mod.rs"]
 mod common;
 
 use nalgebra::{Vector2, Vector3};

@@ -284,14 +284,13 @@ impl Backdrop {
                 .iter()
                 .map(|&(x, band, m)| m - b.at(x, (band as u32 * CELL) as f64))
                 .collect();
-            let mad = 1.4826
-                * median(
-                    res.iter()
-                        .zip(&keep)
-                        .filter(|(_, &k)| k)
-                        .map(|(r, _)| r.abs())
-                        .collect(),
-                );
+            let mad = crate::stats::robust_sigma(
+                res.iter()
+                    .zip(&keep)
+                    .filter(|(_, &k)| k)
+                    .map(|(r, _)| r.abs())
+                    .collect(),
+            );
             // Cells more than 3 MADs (and 1% of full scale) off the surface are not backdrop.
             let lim = (3.0 * mad).max(0.01);
             keep = res.iter().map(|r| r.abs() <= lim).collect();
@@ -309,7 +308,7 @@ impl Backdrop {
         if dev.is_empty() {
             dev.push(0.0);
         }
-        b.noise = 1.4826 * median(dev);
+        b.noise = crate::stats::robust_sigma(dev);
         b
     }
 }
@@ -473,19 +472,18 @@ pub fn find_spheres(
         // little about it): 1.4826 × MAD / √2 of horizontal neighbour differences inside the
         // blob. A Sobel component of white noise σ has σ·√12/8 ≈ 0.43σ: 2.5σ keeps false edges
         // inside the sphere below one in a million pixels.
-        let mut diffs: Vec<f64> = (b.bbox[1]..=b.bbox[3])
+        let diffs: Vec<f64> = (b.bbox[1]..=b.bbox[3])
             .flat_map(|y| (b.bbox[0]..b.bbox[2]).map(move |x| (x, y)))
             .filter(|&(x, y)| {
                 mask[(y * img.width + x) as usize] && mask[(y * img.width + x + 1) as usize]
             })
             .map(|(x, y)| (lum.at(x + 1, y) as f64 - lum.at(x, y) as f64).abs())
             .collect();
+        // A difference of two pixels has √2 times a pixel's noise.
         let inner_noise = if diffs.is_empty() {
             0.0
         } else {
-            let k = diffs.len() / 2;
-            diffs.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-            1.4826 * diffs[k] / std::f64::consts::SQRT_2
+            crate::stats::robust_sigma(diffs) / std::f64::consts::SQRT_2
         };
         let threshold = (5.0 * noise).max(2.5 * inner_noise).max(0.03 * level);
         let mut edges = silhouette::edge_points(lum, region, threshold, proj);

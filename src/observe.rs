@@ -237,9 +237,9 @@ pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
         }
     }
     let f2 = floor * floor;
-    let robust_var = |d: &mut Vec<f64>| {
-        d.sort_by(|a, b| a.total_cmp(b));
-        let sd = 1.4826 * d[d.len() / 2] / std::f64::consts::SQRT_2;
+    // A difference of two pixels has √2 times a pixel's noise.
+    let robust_var = |d: Vec<f64>| {
+        let sd = crate::stats::robust_sigma(d) / std::f64::consts::SQRT_2;
         (sd * sd).max(f2)
     };
     pairs.map(|mut p| {
@@ -248,16 +248,14 @@ pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
             return [f2, 0.0];
         }
         if p.len() < 20 * BINS {
-            let mut d: Vec<f64> = p.iter().map(|x| x.1).collect();
-            return [robust_var(&mut d), 0.0];
+            return [robust_var(p.iter().map(|x| x.1).collect()), 0.0];
         }
         p.sort_by(|a, b| a.0.total_cmp(&b.0));
         // Per bin: mean level, variance, and the variance's weight (count / var²).
         let mut pts = vec![];
         for chunk in p.chunks(p.len().div_ceil(BINS)) {
             let level = chunk.iter().map(|x| x.0).sum::<f64>() / chunk.len() as f64;
-            let mut d: Vec<f64> = chunk.iter().map(|x| x.1).collect();
-            let var = robust_var(&mut d);
+            let var = robust_var(chunk.iter().map(|x| x.1).collect());
             pts.push((level, var, chunk.len() as f64 / (var * var)));
         }
         // Weighted least squares of var = a + b·level.

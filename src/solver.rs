@@ -695,12 +695,11 @@ pub fn huber_weights(
         floor: false,
     };
     let (res, _) = probe.evaluate(false);
-    let mut abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
+    let abs: Vec<f64> = res.iter().map(|r| r.abs()).filter(|r| *r > 0.0).collect();
     if abs.is_empty() {
         return (obs.to_vec(), 0, false);
     }
-    abs.sort_by(|a, b| a.total_cmp(b));
-    let sigma = 1.4826 * abs[abs.len() / 2];
+    let sigma = crate::stats::robust_sigma(abs);
     let mut changed = false;
     let mut down = 0;
     let next = obs

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """One sphere rendered by Mitsuba 3's stock volumetric path tracer, for checking `workbench synth pbr`.
 
-The scene of tests/pbr.rs `renders_what_mitsuba_stock_volpath_renders`: a homogeneous medium
+The scene of tests/it/pbr.rs `renders_what_mitsuba_stock_volpath_renders`: a homogeneous medium
 (σt 2/mm, single-scattering albedo 0.9, 0.96, 0.92, isotropic phase) inside a GGX rough dielectric
 sphere (η 1.62, radius 15 mm, centre 200 mm in front of the camera), 80×80 pixels, fx = fy = 300
 px, no distortion. Mitsuba's volpath cannot reach a directional light through a dielectric

@@ -9,6 +9,7 @@ pub mod run;
 
 use crate::camera::{Camera, Distortion};
 use crate::intrinsics::{IntrinsicsStd, ViewReport};
+use crate::stats::{mad_sigma, median};
 use nalgebra::{DMatrix, Matrix2x3, Matrix3, Rotation3, SMatrix, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -291,14 +292,7 @@ pub fn outlier_views(per_view_rms: &[f64]) -> Vec<usize> {
     if per_view_rms.len() < 4 {
         return vec![];
     }
-    let med = median(per_view_rms);
-    let mad = median(
-        &per_view_rms
-            .iter()
-            .map(|e| (e - med).abs())
-            .collect::<Vec<_>>(),
-    ) * 1.4826;
-    let limit = outlier_limit(med, mad);
+    let limit = outlier_limit(median(per_view_rms), mad_sigma(per_view_rms));
     (0..per_view_rms.len())
         .filter(|&i| per_view_rms[i] > limit)
         .collect()
@@ -307,20 +301,6 @@ pub fn outlier_views(per_view_rms: &[f64]) -> Vec<usize> {
 /// The threshold [`outlier_views`] applies.
 pub fn outlier_limit(median: f64, robust_sd: f64) -> f64 {
     (2.0 * median).max(median + 4.0 * robust_sd)
-}
-
-pub fn median(v: &[f64]) -> f64 {
-    let mut s: Vec<f64> = v.iter().cloned().filter(|x| x.is_finite()).collect();
-    if s.is_empty() {
-        return f64::NAN;
-    }
-    s.sort_by(|a, b| a.total_cmp(b));
-    let n = s.len();
-    if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
-    }
 }
 
 /// Corner coverage of the frame on a grid of `gx × gy` cells: counts per cell, row-major.
@@ -467,11 +447,8 @@ pub fn calibrate(
             .collect();
         let out = outlier_views(&per_view);
         {
-            let med = median(&per_view);
-            let mad =
-                median(&per_view.iter().map(|e| (e - med).abs()).collect::<Vec<_>>()) * 1.4826;
             if limit_used.is_nan() || !out.is_empty() {
-                limit_used = outlier_limit(med, mad);
+                limit_used = outlier_limit(median(&per_view), mad_sigma(&per_view));
             }
         }
         let budget = (active.len() + rejected.len()) / 5;
@@ -488,8 +465,7 @@ pub fn calibrate(
             break;
         }
         let med = median(&per_view);
-        let mad = median(&per_view.iter().map(|e| (e - med).abs()).collect::<Vec<_>>()) * 1.4826;
-        let limit = outlier_limit(med, mad);
+        let limit = outlier_limit(med, mad_sigma(&per_view));
         for &i in out.iter().rev() {
             let v = active.remove(i);
             let why = format!(

@@ -222,7 +222,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             .zip(&sol.poses)
             .map(|(v, p)| super::rms(&super::view_residuals(&sol.camera, p, v, &object)))
             .collect();
-        let med = super::median(&errs);
+        let med = crate::stats::median(&errs);
         let suspicious: Vec<usize> = usable
             .iter()
             .zip(&errs)

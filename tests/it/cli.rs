@@ -1,6 +1,6 @@
 //! The binary: real runs, and bad input giving one clear line, a non-zero exit and no panic.
 
-mod common;
+use crate::common;
 use common::wb;
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 // Colour channels are indexed alongside several arrays at once.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
+use crate::common;
 use common::{close, derivative};
 use nalgebra::Vector3;
 use workbench::cdrf::Convolution;

@@ -1,7 +1,7 @@
 //! `workbench detect` against ground truth: synthetic sessions rendered by the project's forward
 //! model (truth.json) and DiLiGenT's calibrated light directions (real photos).
 
-mod common;
+use crate::common;
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 use workbench::detect::{self, Detections, Options};

@@ -1,6 +1,6 @@
 //! The CDRF closed form against adaptive quadrature, its limits, its range and its derivatives.
 
-mod common;
+use crate::common;
 use common::{close, derivative, integrate};
 use proptest::prelude::*;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI};

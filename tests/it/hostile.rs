@@ -3,7 +3,7 @@
 //! paths leaving the session folder, a symlink loop. Each must give one line on stderr naming the
 //! file at fault, a non-zero exit, no panic, and no fit.json or detections.json.
 
-mod common;
+use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use workbench::synth::session::{self, Format, SessionConfig};

@@ -1,7 +1,7 @@
 //! `workbench solve` against ground truth: synthetic sessions rendered by the project's forward
 //! model with known material and light (truth.json), through detection, sampling and the fit.
 
-mod common;
+use crate::common;
 
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};

@@ -9,7 +9,7 @@
 //!
 //! Never NaN, never a panic, never a wrong answer reported as converged without a flag.
 
-mod common;
+use crate::common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use std::path::Path;

@@ -2,7 +2,7 @@
 //! here wrote: Mitsuba 3's stock volumetric path tracer (datasets/mitsuba/stock_check.py, its
 //! output committed) and ../shared/data/pbr-jade (Mitsuba's boundary with another NEE tracer).
 
-mod common;
+use crate::common;
 
 use nalgebra::{Vector2, Vector3};
 use workbench::camera::Camera;

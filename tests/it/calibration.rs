@@ -1,7 +1,7 @@
 //! Calibration: the projection Jacobian, the uncertainty formula against Monte Carlo, and the
 //! whole `calibrate` pipeline against synthetic ground truth and OpenCV's real sample photos.
 
-mod common;
+use crate::common;
 use nalgebra::Vector3;
 use workbench::calibration::{project_with_jacobian, Pose};
 use workbench::camera::{Camera, Distortion};

@@ -1,7 +1,7 @@
 //! `workbench lut` and `workbench render`: the table against the closed form, the renderer against
 //! the solver's own prediction of a sphere, mesh formats, and the command line.
 
-mod common;
+use crate::common;
 use common::wb;
 use nalgebra::Vector3;
 use std::path::Path;

@@ -1,7 +1,6 @@
 //! Synthetic sessions and checkerboards against their own truth files, read back from disk
 //! through independent decoders (image, kamadak-exif, serde_json).
 
-mod common;
 use nalgebra::{Rotation3, Vector2, Vector3};
 use std::path::Path;
 use workbench::camera::{Camera, Distortion};

@@ -1,7 +1,7 @@
 //! Do the stated standard errors cover the real error? Synthetic sessions over many noise seeds
 //! (the truth known exactly) and the physically based jade session (the light and η known).
 
-mod common;
+use crate::common;
 
 use nalgebra::Vector3;
 use std::path::Path;

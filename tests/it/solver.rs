@@ -1,7 +1,7 @@
 //! The solver core: parameter mapping and Jacobian against finite differences, and recovery of
 //! known parameters from observations rendered by the model itself.
 
-mod common;
+use crate::common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};

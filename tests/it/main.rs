@@ -1,0 +1,22 @@
+//! The integration tests as one crate, a module per area: the suite links the OpenCV-backed
+//! library once instead of once per file (docs/measured.md, "Build and suite time").
+
+mod common;
+
+mod calibration;
+mod cdrf;
+mod cli;
+mod curvature;
+mod detect;
+mod exif;
+mod geometry;
+mod hostile;
+mod model;
+mod pbr;
+mod photo;
+mod render;
+mod solve;
+mod solver;
+mod stress;
+mod synth;
+mod uncertainty;
