@@ -1,0 +1,107 @@
+//! `workbench calibrate`: the camera from chessboard photos (OpenCV).
+
+use crate::cli::*;
+use anyhow::{Context, Result};
+
+#[cfg(feature = "opencv")]
+pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
+    use workbench::calibration::{run, Pattern};
+    let pattern = match &a.pattern {
+        Some(p) => Some(Pattern::parse(p).with_context(|| {
+            format!("--pattern {p:?}: expected COLSxROWS inner corners, at least 2x2, e.g. 9x6")
+        })?),
+        None => None,
+    };
+    let sq = a.square.trim().trim_end_matches("mm").trim();
+    let square_mm: f64 = sq
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .with_context(|| {
+            format!(
+                "--square {:?}: expected a positive size in mm, e.g. 25mm",
+                a.square
+            )
+        })?;
+    workbench::cv::set_threads(1);
+    use workbench::calibration::DetectorChoice;
+    let detector = match a.detector {
+        DetectorArg::Auto => DetectorChoice::Auto,
+        DetectorArg::Classic => DetectorChoice::Classic,
+        DetectorArg::Sb => DetectorChoice::SectorBased,
+        DetectorArg::Both => DetectorChoice::Both,
+    };
+    let opts = run::Options {
+        dir: a.dir.clone(),
+        pattern,
+        square_mm,
+        out: a.out,
+        plots: a.plots,
+        detector,
+        subpix_window: a.subpix_window,
+        quiet,
+    };
+    let r = run::run(&opts, &workbench::cv::OpenCvDetect, &workbench::cv::OpenCv)?;
+    let c = &r.calibration;
+    let cam = &c.camera;
+    println!(
+        "pattern  {} inner corners, {square_mm} mm squares",
+        r.pattern
+    );
+    println!(
+        "views    {} used, {} rejected as outliers, {} unusable, of {} image(s) read",
+        c.used.len(),
+        c.rejected.len(),
+        r.unusable.len(),
+        r.images_read
+    );
+    for (f, why) in &r.unusable {
+        println!("         {f}: {why}");
+    }
+    for n in &c.notes {
+        println!("note     {n}");
+    }
+    let sd = c.std.unwrap_or_default();
+    println!("model    {}", c.model.name());
+    println!("fx       {:10.3} ± {:.3} px", cam.fx, sd.fx);
+    println!("fy       {:10.3} ± {:.3} px", cam.fy, sd.fy);
+    println!("cx       {:10.3} ± {:.3} px", cam.cx, sd.cx);
+    println!("cy       {:10.3} ± {:.3} px", cam.cy, sd.cy);
+    let d = cam.distortion;
+    let e = sd.distortion;
+    println!(
+        "k1 k2    {:+.5} ± {:.5}   {:+.5} ± {:.5}",
+        d.k1, e.k1, d.k2, e.k2
+    );
+    println!(
+        "p1 p2 k3 {:+.6} ± {:.6}   {:+.6} ± {:.6}   {:+.5} ± {:.5}",
+        d.p1, e.p1, d.p2, e.p2, d.k3, e.k3
+    );
+    println!("RMS      {:.4} px over the used views", c.rms_px);
+    if let Some(cv) = c.cross_validation.iter().find(|v| v.model == c.model) {
+        let j = cv.jackknife_std;
+        println!(
+            "cross-validation ({}-fold): held-out RMS {:.4} px; jackknife std fx {:.2} fy {:.2} cx {:.2} cy {:.2} px",
+            cv.folds, cv.heldout_rms_px, j[0], j[1], j[2], j[3]
+        );
+    }
+    for n in r.exif_notes.iter().filter(|n| !n.starts_with("warning: ")) {
+        println!("exif     {n}");
+    }
+    for w in &c.warnings {
+        println!("warning  {w}");
+    }
+    println!(
+        "wrote    {} and {}",
+        r.intrinsics_file.display(),
+        r.yaml_file.display()
+    );
+    if let Some(dir) = r.plot_files.first().and_then(|p| p.parent()) {
+        println!("plots    {} ({} files)", dir.display(), r.plot_files.len());
+    }
+    println!(
+        "time     detection {:.2} s, calibration {:.2} s",
+        r.detection_s, r.calibration_s
+    );
+    Ok(())
+}

@@ -1,0 +1,78 @@
+//! `workbench render`: a mesh rendered with a fit's CDRF, or the renderer checked.
+
+use super::beside;
+use crate::cli::*;
+use anyhow::{bail, Context, Result};
+
+pub(crate) fn render(a: RenderArgs) -> Result<()> {
+    let table = table_size(a.table, workbench::lut::DEFAULT_TOLERANCE);
+    if a.check {
+        let dir = a
+            .out
+            .clone()
+            .unwrap_or_else(|| beside(&a.fit, "render-check"));
+        let res = workbench::render_job::check(&a.fit, &dir, table)
+            .with_context(|| format!("render --check {}", a.fit.display()))?;
+        println!("sphere               radius  pixels  silhouette  rel. RMS   largest");
+        for c in &res {
+            println!(
+                "{:<16} {:>2}  {:>5.1}  {:>6}  {:>10}  {:>8.2e}  {:>8.2e}",
+                c.image, c.index, c.radius_mm, c.pixels, c.silhouette_px, c.rel_rmse, c.max_rel
+            );
+        }
+        println!("wrote    {}", dir.join("sphere-check.json").display());
+        return Ok(());
+    }
+    let (Some(mesh), Some(out)) = (a.mesh.clone(), a.out.clone()) else {
+        bail!("a mesh and --out are needed without --check");
+    };
+    let mut o = workbench::render_job::RenderOptions::new(&mesh, &a.fit, &out);
+    o.unit = a.unit;
+    o.object_size_mm = a.object_size;
+    o.light_deg = a.light.map(|[az, el]| (az, el));
+    o.view = workbench::render::View {
+        azimuth_deg: a.view[0],
+        elevation_deg: a.view[1],
+        distance: a.distance,
+    };
+    (o.width, o.height) = a.resolution;
+    o.fov_deg = a.fov;
+    o.samples = a.samples;
+    o.shading = a.shading;
+    o.bits = a.bits;
+    o.tone = a.tone;
+    o.exposure = a.exposure;
+    o.table = table;
+    let r = workbench::render_job::run(&o).with_context(|| format!("render {}", mesh.display()))?;
+    println!(
+        "mesh     {} vertices, {} triangles, {:.1} mm across",
+        r.vertices,
+        r.triangles,
+        2.0 * r.radius_mm
+    );
+    println!(
+        "curvature 5/50/95%: {:.4} {:.4} {:.4} /mm; {:.1}% of vertices beyond the table's range (clamped)",
+        r.curvature[0],
+        r.curvature[1],
+        r.curvature[2],
+        100.0 * r.clamped
+    );
+    println!(
+        "table    {}x{} (largest error {:.2e} of the peak); light azimuth {:.1}°, elevation {:.1}°",
+        r.table.0,
+        r.table.1,
+        r.table_error,
+        r.light.azimuth.to_degrees(),
+        r.light.elevation.to_degrees()
+    );
+    println!(
+        "time     load {:.3} s, curvature {:.3} s, table {:.3} s, frame {:.1} ms, write {:.3} s",
+        r.load_s,
+        r.curvature_s,
+        r.table_s,
+        1e3 * r.frame_s,
+        r.write_s
+    );
+    println!("wrote    {}", out.display());
+    Ok(())
+}
