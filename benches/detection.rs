@@ -37,7 +37,7 @@ fn decode_time(files: &[std::path::PathBuf]) -> f64 {
     use rayon::prelude::*;
     let t0 = Instant::now();
     files.par_iter().for_each(|f| {
-        workbench::photo::load_linear_rgb(f, None).unwrap();
+        workbench::formats::photo::load_linear_rgb(f, None).unwrap();
     });
     t0.elapsed().as_secs_f64()
 }
@@ -138,7 +138,7 @@ fn main() {
         for ((im, t), name) in d.images.iter().zip(&truth).zip(&names) {
             let s = &im.spheres[0];
             ours.push(deg(s.light_direction.as_ref().unwrap(), t));
-            let img = workbench::photo::load_linear_rgb(&ball.join(name), None).unwrap();
+            let img = workbench::formats::photo::load_linear_rgb(&ball.join(name), None).unwrap();
             let o = s.outline.outline();
             let (mut n, mut c) = (0.0, Vector2::zeros());
             for y in 0..img.height {
@@ -153,7 +153,7 @@ fn main() {
             }
             let q = c / n;
             let surf = o.surface(&Vector3::new(q.x, q.y, 0.0)).unwrap();
-            let l = workbench::outline::reflect(&surf.normal, &surf.view);
+            let l = workbench::camera::outline::reflect(&surf.normal, &surf.view);
             plain.push(deg(&[l.x, l.y, l.z], t));
         }
         println!("| estimator | mean (°) | median (°) | max (°) |");

@@ -6,7 +6,7 @@
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use nalgebra::Vector3;
 use std::hint::black_box;
-use workbench::cdrf::{self, Convolution};
+use workbench::model::cdrf::{self, Convolution};
 use workbench::model::{Geometry, LightAngles, Model, Params};
 use workbench::synth::session::{self, Layout, SessionConfig};
 
@@ -112,7 +112,7 @@ fn bench_synth(c: &mut Criterion) {
 /// The solver's hot kernel: model + gradient for every observation, accumulated into JᵀJ and Jᵀr
 /// (what one Levenberg–Marquardt evaluation costs), on one core and on all cores.
 fn bench_normal_equations(c: &mut Criterion) {
-    use workbench::solver::{to_unbounded, Obs, Problem};
+    use workbench::fit::solver::{to_unbounded, Obs, Problem};
     let n = 100_000;
     let model = Model::default();
     let params = params();

@@ -6,10 +6,10 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::path::Path;
-use workbench::lut::FitMaterial;
 use workbench::model::{LightAngles, Model};
-use workbench::render::{render, render_into, Pinhole, Samples, Scene, Shading, View};
-use workbench::render_job::{prepare, shader, table, TableSize};
+use workbench::render::job::{prepare, shader, table, TableSize};
+use workbench::render::lut::FitMaterial;
+use workbench::render::raster::{render, render_into, Pinhole, Samples, Scene, Shading, View};
 use workbench::synth::session::SessionConfig;
 
 fn bench_bunny(c: &mut Criterion) {
@@ -29,7 +29,7 @@ fn bench_bunny(c: &mut Criterion) {
         measured_kappa: [1.0 / 35.0, 1.0 / 15.0],
     };
     let t = table(&fm, TableSize::default(), None).unwrap();
-    let prep = prepare(&path, workbench::mesh::Unit::M, None).unwrap();
+    let prep = prepare(&path, workbench::render::mesh::Unit::M, None).unwrap();
     let cam = Pinhole::from_fov(1280, 720, 30.0);
     let scene = Scene::framed(&prep.mesh, &prep.curvature, &View::default(), &cam);
     let mut g = c.benchmark_group("bunny_1280x720");

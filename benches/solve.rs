@@ -16,10 +16,10 @@
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use workbench::joint::{self, Reduction};
+use workbench::figures::plot::{Layer, Plot, PALETTE};
+use workbench::fit::joint::{self, Reduction};
+use workbench::fit::solve::{self, ExtensionChoice, FitFile, Method, Options};
 use workbench::model::N_PARAMS;
-use workbench::plot::{Layer, Plot, PALETTE};
-use workbench::solve::{self, ExtensionChoice, FitFile, Method, Options};
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
 fn detect(dir: &Path) -> f64 {
@@ -115,7 +115,7 @@ fn level_fit(l: &solve::Loaded, opts: &Options, reduction: Reduction) -> (f64, j
         light_std: l.light_std,
         floor: l.fit_floor,
     };
-    let spheres: Vec<&workbench::observe::SphereData> = l.spheres.iter().collect();
+    let spheres: Vec<&workbench::fit::observe::SphereData> = l.spheres.iter().collect();
     let t0 = Instant::now();
     let jf = joint::fit_joint(&setup, &spheres);
     (t0.elapsed().as_secs_f64(), jf)
@@ -126,7 +126,7 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
     let l = solve::load(&opts).unwrap();
     let levels: Vec<(String, Reduction)> = std::iter::once(("every pixel".into(), Reduction::None))
         .chain(
-            workbench::reduce::FACTORS
+            workbench::fit::reduce::FACTORS
                 .iter()
                 .map(|&f| (format!("{}° cells", f as f64 * 0.25), Reduction::Factor(f))),
         )
@@ -154,7 +154,7 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
     );
     plot.layers.push(Layer::HLine {
         y: (0.3f64).log10(),
-        color: workbench::plot::GREY,
+        color: workbench::figures::plot::GREY,
         dashed: true,
         label: Some("0.3 std (auto's limit)".into()),
     });
@@ -178,8 +178,8 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
                 let f = (jf.chosen.width_deg / 0.25).round() as u32;
                 let pooled = {
                     // The prediction for this level (as `auto` computes it).
-                    let sp: Vec<&workbench::observe::SphereData> = l.spheres.iter().collect();
-                    let mut pl = workbench::reduce::Pooled::new(
+                    let sp: Vec<&workbench::fit::observe::SphereData> = l.spheres.iter().collect();
+                    let mut pl = workbench::fit::reduce::Pooled::new(
                         l.light.unwrap_or(Vector3::new(0.0, 0.0, -1.0)),
                         l.highlight_radius.unwrap_or(0.0),
                     );

@@ -8,9 +8,9 @@
 
 use crate::detect;
 use crate::error::{Error, Result};
-use crate::joint::Reduction;
-use crate::plot::{Layer, Plot, PALETTE};
-use crate::solve::{self, Options};
+use crate::figures::plot::{Layer, Plot, PALETTE};
+use crate::fit::joint::Reduction;
+use crate::fit::solve::{self, Options};
 use crate::synth::session::{self, Format, SessionConfig, SessionTruth};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -151,7 +151,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         );
         let _ = std::fs::remove_dir_all(&dir);
         session::generate(&config(d), &dir, None, true)?;
-        let truth: SessionTruth = crate::output::read_json(&dir.join("truth.json"))?;
+        let truth: SessionTruth = crate::formats::output::read_json(&dir.join("truth.json"))?;
         pb.inc(1);
         let t = Instant::now();
         let det = detect::run(&detect::Options {
@@ -209,15 +209,15 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         rows,
         total_s: t0.elapsed().as_secs_f64(),
     };
-    crate::output::write_json(&opts.out.join("report.json"), &report)?;
-    crate::output::write_bytes(&opts.out.join("report.md"), markdown(&report).as_bytes())?;
+    crate::formats::output::write_json(&opts.out.join("report.json"), &report)?;
+    crate::formats::output::write_bytes(&opts.out.join("report.md"), markdown(&report).as_bytes())?;
     error_vs_time(&report).save(&opts.out.join("error-vs-time"))?;
     Ok(report)
 }
 
 #[cfg(feature = "opencv")]
 fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
-    use crate::calibration::{run as cal, DetectorChoice};
+    use crate::camera::calibration::{run as cal, DetectorChoice};
     use crate::synth::checkerboard::{self, CheckerConfig};
     let mut cam = session::default_camera();
     cam.fx *= 0.5;
@@ -251,7 +251,11 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
             quiet: true,
         };
         let t = Instant::now();
-        let r = cal::run(&o, &crate::cv::OpenCvDetect, &crate::cv::OpenCv)?;
+        let r = cal::run(
+            &o,
+            &crate::camera::cv::OpenCvDetect,
+            &crate::camera::cv::OpenCv,
+        )?;
         let c = &r.calibration.camera;
         rows.push(Row {
             stage: "calibration".into(),

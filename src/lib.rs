@@ -8,43 +8,15 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bench;
-pub mod calibration;
 pub mod camera;
-pub mod cdrf;
-#[cfg(feature = "opencv")]
-pub mod cv;
 pub mod detect;
-pub mod entry;
 pub mod error;
-pub mod fitplot;
+pub mod figures;
+pub mod fit;
 pub mod formats;
-pub mod fresnel;
-pub mod highlight;
-pub mod intrinsics;
-pub mod joint;
-pub mod lut;
-pub mod mesh;
 pub mod model;
-pub mod observe;
-pub mod outline;
-pub mod output;
-pub mod overlay;
-pub mod paper;
-pub mod photo;
-pub mod plot;
 pub mod progress;
-pub mod reduce;
 pub mod render;
-pub mod render_check;
-pub mod render_job;
-pub mod report;
-pub mod samples;
-pub mod session;
-pub mod silhouette;
-pub mod solve;
-pub mod solver;
-pub mod specular;
-pub mod sphere;
 pub mod stats;
 pub mod synth;
 

@@ -6,7 +6,7 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     let path = std::env::temp_dir().join(format!("workbench-fuzz-{}.img", std::process::id()));
     if std::fs::write(&path, data).is_ok() {
-        let _ = workbench::photo::load_linear_rgb(&path, None);
-        let _ = workbench::photo::ExifInfo::read(&path);
+        let _ = workbench::formats::photo::load_linear_rgb(&path, None);
+        let _ = workbench::formats::photo::ExifInfo::read(&path);
     }
 });

@@ -91,7 +91,7 @@ pub(crate) struct SolveArgs {
     /// Pixel reduction: auto (the coarsest cells whose predicted parameter shift stays below 0.3
     /// standard errors), none (every pixel), or a cell width in degrees: 0.25, 0.5, 1, 2, 4.
     #[arg(long, default_value = "auto", value_parser = parse_reduce)]
-    pub(crate) reduce: workbench::joint::Reduction,
+    pub(crate) reduce: workbench::fit::joint::Reduction,
     /// Plain least squares instead of the Huber loss.
     #[arg(long)]
     pub(crate) no_robust: bool,
@@ -99,7 +99,7 @@ pub(crate) struct SolveArgs {
     /// auto (chosen by held-out error; needs 4 or more radii), or any of sigma-exponent,
     /// albedo-curvature, two-gaussian (comma-separated; both = the first two).
     #[arg(long, default_value = "default", value_parser = parse_extensions)]
-    pub(crate) extensions: workbench::solve::ExtensionChoice,
+    pub(crate) extensions: workbench::fit::solve::ExtensionChoice,
     /// Start σ0 (mm), one value or r,g,b, instead of the search over the data.
     #[arg(long, value_parser = triple)]
     pub(crate) start_sigma0: Option<[f64; 3]>,
@@ -162,7 +162,7 @@ pub(crate) struct LutArgs {
     #[arg(long, default_value = "auto", value_parser = parse_table_size)]
     pub(crate) size: TableArg,
     /// Largest interpolation error allowed by --size auto, as a fraction of the table's peak.
-    #[arg(long, default_value_t = workbench::lut::DEFAULT_TOLERANCE)]
+    #[arg(long, default_value_t = workbench::render::lut::DEFAULT_TOLERANCE)]
     pub(crate) tolerance: f64,
     /// Curvature of the table's last row (1/mm; default 3 / the smallest radius fitted).
     #[arg(long)]
@@ -186,7 +186,7 @@ pub(crate) struct RenderArgs {
     pub(crate) check: bool,
     /// Units of the mesh file's coordinates.
     #[arg(long, value_enum, default_value = "mm")]
-    pub(crate) unit: workbench::mesh::Unit,
+    pub(crate) unit: workbench::render::mesh::Unit,
     /// Rescale the mesh so its bounding sphere is this many mm across.
     #[arg(long)]
     pub(crate) object_size: Option<f64>,
@@ -208,16 +208,16 @@ pub(crate) struct RenderArgs {
     pub(crate) fov: f64,
     /// Coverage samples per pixel (anti-aliasing).
     #[arg(long, value_enum, default_value = "4")]
-    pub(crate) samples: workbench::render::Samples,
+    pub(crate) samples: workbench::render::raster::Samples,
     /// cdrf: the measured CDRF; lambert: the same material with a plain clamped cosine.
     #[arg(long, value_enum, default_value = "cdrf")]
-    pub(crate) shading: workbench::render::Shading,
+    pub(crate) shading: workbench::render::raster::Shading,
     /// Bits per channel of the PNG (8 or 16).
     #[arg(long, default_value_t = 8)]
     pub(crate) bits: u8,
     /// Transfer curve.
     #[arg(long, value_enum, default_value = "srgb")]
-    pub(crate) tone: workbench::render::Tone,
+    pub(crate) tone: workbench::render::raster::Tone,
     /// Exposure multiplier (1: a flat surface facing the light at 0.8 of full scale).
     #[arg(long, default_value_t = 1.0)]
     pub(crate) exposure: f64,
@@ -226,10 +226,10 @@ pub(crate) struct RenderArgs {
     pub(crate) table: TableArg,
 }
 
-pub(crate) fn table_size(size: TableArg, tolerance: f64) -> workbench::render_job::TableSize {
+pub(crate) fn table_size(size: TableArg, tolerance: f64) -> workbench::render::job::TableSize {
     match size.0 {
-        Some((a, b)) => workbench::render_job::TableSize::Fixed(a, b),
-        None => workbench::render_job::TableSize::Auto(tolerance),
+        Some((a, b)) => workbench::render::job::TableSize::Fixed(a, b),
+        None => workbench::render::job::TableSize::Auto(tolerance),
     }
 }
 

@@ -66,8 +66,10 @@ pub(crate) fn parse_prior(s: &str) -> std::result::Result<(f64, f64), String> {
     Ok((m, sd))
 }
 
-pub(crate) fn parse_reduce(s: &str) -> std::result::Result<workbench::joint::Reduction, String> {
-    use workbench::joint::Reduction;
+pub(crate) fn parse_reduce(
+    s: &str,
+) -> std::result::Result<workbench::fit::joint::Reduction, String> {
+    use workbench::fit::joint::Reduction;
     match s {
         "auto" => Ok(Reduction::Auto),
         "none" | "0" => Ok(Reduction::None),
@@ -76,7 +78,7 @@ pub(crate) fn parse_reduce(s: &str) -> std::result::Result<workbench::joint::Red
                 .parse()
                 .map_err(|_| format!("expected auto, none or degrees, got {s:?}"))?;
             let f = (w / 0.25).round() as u32;
-            if workbench::reduce::FACTORS.contains(&f) && (f as f64 * 0.25 - w).abs() < 1e-9 {
+            if workbench::fit::reduce::FACTORS.contains(&f) && (f as f64 * 0.25 - w).abs() < 1e-9 {
                 Ok(Reduction::Factor(f))
             } else {
                 Err(format!(
@@ -89,9 +91,9 @@ pub(crate) fn parse_reduce(s: &str) -> std::result::Result<workbench::joint::Red
 
 pub(crate) fn parse_extensions(
     s: &str,
-) -> std::result::Result<workbench::solve::ExtensionChoice, String> {
-    use workbench::joint::Extensions;
-    use workbench::solve::ExtensionChoice;
+) -> std::result::Result<workbench::fit::solve::ExtensionChoice, String> {
+    use workbench::fit::joint::Extensions;
+    use workbench::fit::solve::ExtensionChoice;
     match s {
         "default" => return Ok(ExtensionChoice::Default),
         "none" => return Ok(ExtensionChoice::None),

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 
 #[cfg(feature = "opencv")]
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
-    use workbench::calibration::{run, Pattern};
+    use workbench::camera::calibration::{run, Pattern};
     let pattern = match &a.pattern {
         Some(p) => Some(Pattern::parse(p).with_context(|| {
             format!("--pattern {p:?}: expected COLSxROWS inner corners, at least 2x2, e.g. 9x6")
@@ -23,8 +23,8 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
                 a.square
             )
         })?;
-    workbench::cv::set_threads(1);
-    use workbench::calibration::DetectorChoice;
+    workbench::camera::cv::set_threads(1);
+    use workbench::camera::calibration::DetectorChoice;
     let detector = match a.detector {
         DetectorArg::Auto => DetectorChoice::Auto,
         DetectorArg::Classic => DetectorChoice::Classic,
@@ -41,7 +41,11 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<()> {
         subpix_window: a.subpix_window,
         quiet,
     };
-    let r = run::run(&opts, &workbench::cv::OpenCvDetect, &workbench::cv::OpenCv)?;
+    let r = run::run(
+        &opts,
+        &workbench::camera::cv::OpenCvDetect,
+        &workbench::camera::cv::OpenCv,
+    )?;
     let c = &r.calibration;
     let cam = &c.camera;
     println!(

@@ -4,7 +4,7 @@ use anyhow::Result;
 use std::path::PathBuf;
 
 pub(crate) fn check(session: PathBuf) -> Result<()> {
-    let r = workbench::session::inspect(&session)?;
+    let r = workbench::formats::session::inspect(&session)?;
     println!("session  {}", r.session_file.display());
     if let Some(m) = &r.material {
         println!("material {m}");

@@ -35,8 +35,8 @@ pub(crate) fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
                     deg(l),
                     s.light_std_deg.unwrap_or(f64::NAN),
                     match h.method {
-                        workbench::highlight::Method::LobeFit => " (lobe fit)",
-                        workbench::highlight::Method::Centroid => " (centroid)",
+                        workbench::detect::highlight::Method::LobeFit => " (lobe fit)",
+                        workbench::detect::highlight::Method::Centroid => " (centroid)",
                     },
                     if h.outlier { " OUTLIER" } else { "" }
                 ),
@@ -73,10 +73,10 @@ pub(crate) fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
             deg(l),
             d.light_std_deg.unwrap_or(f64::NAN)
         ),
-        (None, workbench::session::LightMode::Shared) => {
+        (None, workbench::formats::session::LightMode::Shared) => {
             println!("light    none: no usable highlight on any sphere")
         }
-        (None, workbench::session::LightMode::PerImage) => {}
+        (None, workbench::formats::session::LightMode::PerImage) => {}
     }
     let out = a
         .out

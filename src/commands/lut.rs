@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 
 pub(crate) fn lut(a: LutArgs) -> Result<()> {
     let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "lut"));
-    let (t, fm, paths) = workbench::render_job::write_lut(
+    let (t, fm, paths) = workbench::render::job::write_lut(
         &a.fit,
         &out,
         table_size(a.size, a.tolerance),

@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 
 pub(crate) fn plot(a: PlotArgs, quiet: bool) -> Result<()> {
     let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "plots"));
-    let files = workbench::fitplot::replot(&a.fit, &out, quiet)
+    let files = workbench::figures::fitplot::replot(&a.fit, &out, quiet)
         .with_context(|| format!("plot {}", a.fit.display()))?;
     println!("figures  {} ({} files)", out.display(), files.len());
     println!("index    {}", out.join("index.html").display());

@@ -5,13 +5,13 @@ use crate::cli::*;
 use anyhow::{bail, Context, Result};
 
 pub(crate) fn render(a: RenderArgs) -> Result<()> {
-    let table = table_size(a.table, workbench::lut::DEFAULT_TOLERANCE);
+    let table = table_size(a.table, workbench::render::lut::DEFAULT_TOLERANCE);
     if a.check {
         let dir = a
             .out
             .clone()
             .unwrap_or_else(|| beside(&a.fit, "render-check"));
-        let res = workbench::render_job::check(&a.fit, &dir, table)
+        let res = workbench::render::job::check(&a.fit, &dir, table)
             .with_context(|| format!("render --check {}", a.fit.display()))?;
         println!("sphere               radius  pixels  silhouette  rel. RMS   largest");
         for c in &res {
@@ -26,11 +26,11 @@ pub(crate) fn render(a: RenderArgs) -> Result<()> {
     let (Some(mesh), Some(out)) = (a.mesh.clone(), a.out.clone()) else {
         bail!("a mesh and --out are needed without --check");
     };
-    let mut o = workbench::render_job::RenderOptions::new(&mesh, &a.fit, &out);
+    let mut o = workbench::render::job::RenderOptions::new(&mesh, &a.fit, &out);
     o.unit = a.unit;
     o.object_size_mm = a.object_size;
     o.light_deg = a.light.map(|[az, el]| (az, el));
-    o.view = workbench::render::View {
+    o.view = workbench::render::raster::View {
         azimuth_deg: a.view[0],
         elevation_deg: a.view[1],
         distance: a.distance,
@@ -43,7 +43,8 @@ pub(crate) fn render(a: RenderArgs) -> Result<()> {
     o.tone = a.tone;
     o.exposure = a.exposure;
     o.table = table;
-    let r = workbench::render_job::run(&o).with_context(|| format!("render {}", mesh.display()))?;
+    let r =
+        workbench::render::job::run(&o).with_context(|| format!("render {}", mesh.display()))?;
     println!(
         "mesh     {} vertices, {} triangles, {:.1} mm across",
         r.vertices,

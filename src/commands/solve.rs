@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use workbench::model::LightAngles;
 
 pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
-    use workbench::solve::{self, Method, Options};
+    use workbench::fit::solve::{self, Method, Options};
     let _ = a.joint;
     let mut o = Options::new(&a.session);
     o.out = a.out.clone();
@@ -38,11 +38,11 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
     });
     o.redetect = a.redetect;
     o.light_fit = if a.hold_light {
-        workbench::joint::LightFit::Hold
+        workbench::fit::joint::LightFit::Hold
     } else if a.free_light {
-        workbench::joint::LightFit::Free
+        workbench::fit::joint::LightFit::Free
     } else {
-        workbench::joint::LightFit::Prior
+        workbench::fit::joint::LightFit::Prior
     };
     o.jackknife = !a.no_jackknife;
     o.entry_transmission = a.entry_transmission;

@@ -9,7 +9,7 @@
 //! i.e. exposure 1 is 1/30 s at f/8 and ISO 100. The time comes from ExposureTime, else from the
 //! APEX ShutterSpeedValue (t = 2^−Tv); the f-number from FNumber, else from the APEX ApertureValue
 //! (N = 2^(Av/2)). A photo without ISO or f-number is compared at the value the session's other
-//! photos share (`crate::session::inspect` decides, and refuses when they differ).
+//! photos share (`crate::formats::session::inspect` decides, and refuses when they differ).
 
 use crate::error::{Error, Result};
 use exif::{experimental::Writer, Field, In, Rational, Tag, Value};

@@ -9,9 +9,9 @@
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::intrinsics::IntrinsicsFile;
-use crate::output::write_json;
-use crate::photo;
+use crate::formats::intrinsics::IntrinsicsFile;
+use crate::formats::output::write_json;
+use crate::formats::photo;
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -9,8 +9,8 @@
 //! it carries Walter's η_o² factor, so radiance inside the medium is η² times the radiance that
 //! entered, and a path that enters and leaves gets both factors, which cancel.
 
-use crate::fresnel;
-use crate::specular::{ggx_d, smith_g1};
+use crate::model::fresnel;
+use crate::model::specular::{ggx_d, smith_g1};
 use nalgebra::Vector3;
 use std::f64::consts::PI;
 

@@ -5,15 +5,15 @@
 //! anti-aliased. A constant ambient floor is added everywhere (stray light of a dark room), then
 //! shot and read noise, then clipping at full scale.
 
+use crate::camera::sphere::{EllipseJson, Sphere};
 use crate::camera::Camera;
-use crate::cdrf::Convolution;
 use crate::error::{Error, Result};
-use crate::intrinsics::IntrinsicsFile;
+use crate::formats::intrinsics::IntrinsicsFile;
+use crate::formats::output::write_json;
+use crate::formats::photo::{self, ExifInfo};
+use crate::formats::session::{self, Session, SessionImage, SessionSphere};
+use crate::model::cdrf::Convolution;
 use crate::model::{Geometry, LightAngles, Material, Model, Params, SpecularParams};
-use crate::output::write_json;
-use crate::photo::{self, ExifInfo};
-use crate::session::{self, Session, SessionImage, SessionSphere};
-use crate::sphere::{EllipseJson, Sphere};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -686,7 +686,7 @@ pub fn generate(
     let intrinsics_ref = match &cfg.intrinsics_ref {
         Some(r) => r.clone(),
         None => {
-            crate::output::write_json(
+            crate::formats::output::write_json(
                 &out.join("intrinsics.json"),
                 &IntrinsicsFile::from_truth(cam),
             )?;

@@ -22,15 +22,15 @@
 
 use super::dielectric::{self, Boundary};
 use super::row_rng;
+use crate::camera::sphere::Sphere;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::intrinsics::IntrinsicsFile;
+use crate::formats::intrinsics::IntrinsicsFile;
+use crate::formats::output::write_json;
+use crate::formats::photo;
+use crate::formats::session::{self, Session, SessionImage, SessionSphere};
+use crate::model::specular::ggx_d;
 use crate::model::LightAngles;
-use crate::output::write_json;
-use crate::photo;
-use crate::session::{self, Session, SessionImage, SessionSphere};
-use crate::specular::ggx_d;
-use crate::sphere::Sphere;
 use crate::stats::percentile;
 use nalgebra::{Vector2, Vector3};
 use rand::Rng;

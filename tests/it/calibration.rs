@@ -3,7 +3,7 @@
 
 use crate::common;
 use nalgebra::Vector3;
-use workbench::calibration::{project_with_jacobian, Pose};
+use workbench::camera::calibration::{project_with_jacobian, Pose};
 use workbench::camera::{Camera, Distortion};
 
 fn camera() -> Camera {
@@ -130,10 +130,10 @@ mod with_opencv {
     use nalgebra::Vector2;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use workbench::calibration::run::{self, Options};
-    use workbench::calibration::{self, DistortionModel, Pattern};
-    use workbench::calibration::{Backend, DetectorChoice, View};
-    use workbench::cv::{OpenCv, OpenCvDetect};
+    use workbench::camera::calibration::run::{self, Options};
+    use workbench::camera::calibration::{self, DistortionModel, Pattern};
+    use workbench::camera::calibration::{Backend, DetectorChoice, View};
+    use workbench::camera::cv::{OpenCv, OpenCvDetect};
 
     fn synthetic_corners(sigma: f64, seed: u64) -> Vec<Vec<Vector2<f64>>> {
         let cam = camera();
@@ -276,9 +276,10 @@ mod with_opencv {
         assert_eq!(j["schema"], "workbench.intrinsics/1");
         assert_eq!(j["views"].as_array().unwrap().len(), 14);
         assert!(j["std"]["fx"].as_f64().unwrap() > 0.0);
-        let back =
-            workbench::cv::read_filestorage_yaml(&std::fs::read_to_string(&r.yaml_file).unwrap())
-                .unwrap();
+        let back = workbench::camera::cv::read_filestorage_yaml(
+            &std::fs::read_to_string(&r.yaml_file).unwrap(),
+        )
+        .unwrap();
         assert!(
             (back.fx - c.fx).abs() < 1e-9 && (back.distortion.k2 - c.distortion.k2).abs() < 1e-12
         );

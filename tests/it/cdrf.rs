@@ -4,7 +4,7 @@ use crate::common;
 use common::{close, derivative, integrate};
 use proptest::prelude::*;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI};
-use workbench::cdrf::{eval, value, Convolution};
+use workbench::model::cdrf::{eval, value, Convolution};
 
 fn gauss(t: f64, s: f64) -> f64 {
     (-0.5 * (t / s).powi(2)).exp() / (s * (2.0 * PI).sqrt())

@@ -2,7 +2,7 @@
 //! real meshes of ../shared/data/meshes.
 
 use nalgebra::Vector3;
-use workbench::mesh::{shapes, Mesh, Unit};
+use workbench::render::mesh::{shapes, Mesh, Unit};
 
 /// Relative errors of `est` against `truth` over vertices: (median, 95th percentile, max).
 fn stats(est: &[f64], truth: &[f64]) -> (f64, f64, f64) {

@@ -108,12 +108,13 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
     let d = run(dir.path()).unwrap();
     let t = truth(dir.path());
     let s = &d.images[0].spheres[0];
-    let img = workbench::photo::load_linear_rgb(&dir.path().join("r20.png"), None).unwrap();
+    let img =
+        workbench::formats::photo::load_linear_rgb(&dir.path().join("r20.png"), None).unwrap();
     let cam = t.intrinsics.camera();
-    let proj = workbench::outline::Projection::Perspective(cam);
+    let proj = workbench::camera::outline::Projection::Perspective(cam);
     // θ and the highlight flags come from the detected light.
     let l = Vector3::from(d.light_direction.unwrap());
-    let smp = workbench::samples::sphere_samples(
+    let smp = workbench::fit::samples::sphere_samples(
         &img,
         t.images[0].exposure,
         &proj,
@@ -122,13 +123,15 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
         Some(&l),
         Some(s.highlight.as_ref().unwrap().radius_deg.to_radians()),
     );
-    assert_eq!(workbench::samples::counts(&smp), s.samples);
-    let sphere =
-        workbench::sphere::Sphere::new(Vector3::from(t.images[0].spheres[0].center_mm), 20.0);
+    assert_eq!(workbench::fit::samples::counts(&smp), s.samples);
+    let sphere = workbench::camera::sphere::Sphere::new(
+        Vector3::from(t.images[0].spheres[0].center_mm),
+        20.0,
+    );
     let mut worst_theta: f64 = 0.0;
     for x in smp
         .iter()
-        .filter(|x| x.flags & workbench::samples::EDGE == 0)
+        .filter(|x| x.flags & workbench::fit::samples::EDGE == 0)
     {
         let i = (x.px[1] * img.width + x.px[0]) as usize;
         for c in 0..3 {
@@ -401,7 +404,7 @@ fn clipped_highlights_are_fitted_and_refined() {
                 h.alpha.unwrap_or(f64::NAN)
             );
             assert!((0.05..0.30).contains(&clipped), "{clipped}");
-            assert_eq!(h.method, workbench::highlight::Method::LobeFit);
+            assert_eq!(h.method, workbench::detect::highlight::Method::LobeFit);
             // The roughness from the ring alone: measured within 15% up to 10% clipped, within
             // 45% at 22% and 31% at 29%.
             let tol = if clipped < 0.1 { 0.25 } else { 0.6 };
@@ -417,10 +420,10 @@ fn clipped_highlights_are_fitted_and_refined() {
         println!("α {alpha} ks {ks}: session light {dl:.3}° ± {std:.3}°");
         assert!(dl < 3.0 * std, "{dl}° ± {std}°");
         // The solve: the light within 0.1° of the truth (the goal).
-        let mut o = workbench::solve::Options::new(dir.path());
+        let mut o = workbench::fit::solve::Options::new(dir.path());
         o.jackknife = false;
         o.quiet = true;
-        let f = workbench::solve::run(&o).unwrap();
+        let f = workbench::fit::solve::run(&o).unwrap();
         let dl = Vector3::from(f.light_direction)
             .angle(&Vector3::from(t.light_direction))
             .to_degrees();
@@ -450,10 +453,10 @@ fn grey_backdrop_and_table() {
         dir
     };
     let solve = |dir: &Path| {
-        let mut o = workbench::solve::Options::new(dir);
+        let mut o = workbench::fit::solve::Options::new(dir);
         o.jackknife = false;
         o.quiet = true;
-        workbench::solve::run(&o).unwrap()
+        workbench::fit::solve::run(&o).unwrap()
     };
     let black = make(Backdrop::Black, false);
     run(black.path()).unwrap();
@@ -490,7 +493,7 @@ fn grey_backdrop_and_table() {
             f.notes
         );
         let fl = f.dark_floor.expect("the floor is fitted");
-        let sigma0_off = |f: &workbench::solve::FitFile| {
+        let sigma0_off = |f: &workbench::fit::solve::FitFile| {
             (0..3)
                 .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
                 .fold(0.0, f64::max)

@@ -3,7 +3,7 @@
 //! field.
 
 use std::path::{Path, PathBuf};
-use workbench::photo::ExifInfo;
+use workbench::formats::photo::ExifInfo;
 
 // ---- a little-endian TIFF/EXIF writer that can be told to be wrong ----
 
@@ -310,7 +310,8 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let mut exif = camera_exif(100);
     exif[1] = rational(F_NUMBER, 4, 1);
     jpeg(&d.join("c.jpg"), tiff(camera_ifd0(), exif, 0));
-    let r = workbench::session::inspect(&session(&d, &["a.jpg", "b.jpg", "c.jpg"])).unwrap();
+    let r =
+        workbench::formats::session::inspect(&session(&d, &["a.jpg", "b.jpg", "c.jpg"])).unwrap();
     let x: Vec<f64> = r.images.iter().map(|i| i.exposure.unwrap()).collect();
     // ISO 200 is twice ISO 100; f/4 is (5.6/4)² = 1.96 times f/5.6.
     assert!((x[1] / x[0] - 2.0).abs() < 1e-12, "{x:?}");
@@ -321,13 +322,13 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let mut exif = camera_exif(100);
     exif.remove(2);
     jpeg(&d.join("n.jpg"), tiff(camera_ifd0(), exif, 0));
-    let err = workbench::session::inspect(&session(&d, &["a.jpg", "b.jpg", "n.jpg"]))
+    let err = workbench::formats::session::inspect(&session(&d, &["a.jpg", "b.jpg", "n.jpg"]))
         .unwrap_err()
         .to_string();
     assert!(err.contains("n.jpg") && err.contains("ISO"), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
     // Beside photos that agree (ISO 100): taken as theirs, with a note.
-    let r = workbench::session::inspect(&session(&d, &["a.jpg", "n.jpg"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(&d, &["a.jpg", "n.jpg"])).unwrap();
     assert!((r.images[1].exposure.unwrap() - r.images[0].exposure.unwrap()).abs() < 1e-15);
     assert!(r.images[1].exif_notes.iter().any(|n| n.contains("no ISO")));
 
@@ -335,7 +336,7 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let mut exif = camera_exif(100);
     exif[0] = rational(EXPOSURE_TIME, 1, 0);
     jpeg(&d.join("z.jpg"), tiff(camera_ifd0(), exif, 0));
-    let err = workbench::session::inspect(&session(&d, &["a.jpg", "z.jpg"]))
+    let err = workbench::formats::session::inspect(&session(&d, &["a.jpg", "z.jpg"]))
         .unwrap_err()
         .to_string();
     assert!(
@@ -352,10 +353,10 @@ fn orientation_turns_the_photo_and_its_size() {
     let mut ifd0 = camera_ifd0();
     ifd0.push(short(ORIENTATION, 6));
     jpeg(&d.join("a.jpg"), tiff(ifd0, camera_exif(100), 0));
-    let r = workbench::session::inspect(&session(&d, &["a.jpg"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(&d, &["a.jpg"])).unwrap();
     // Stored 64×48, shown (and decoded) 48×64.
     assert_eq!((r.images[0].width, r.images[0].height), (48, 64));
-    let img = workbench::photo::load_linear_rgb(&d.join("a.jpg"), None).unwrap();
+    let img = workbench::formats::photo::load_linear_rgb(&d.join("a.jpg"), None).unwrap();
     assert_eq!((img.width, img.height), (48, 64));
     assert!(r.images[0].exif_notes[0].contains("Orientation 6"));
     let _ = std::fs::remove_dir_all(&d);
@@ -408,7 +409,7 @@ fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
     let (w, h) = (40u32, 36u32);
     let px: Vec<u16> = (0..w * h * 3).map(|i| (i * 37 % 65536) as u16).collect();
     tiff16(&d.join("a.tiff"), w, h, &px);
-    let r = workbench::session::inspect(&session(&d, &["a.tiff"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(&d, &["a.tiff"])).unwrap();
     let im = &r.images[0];
     assert_eq!((im.bits, im.linear, im.width, im.height), (16, true, w, h));
     let x = im.exposure.unwrap();
@@ -418,7 +419,7 @@ fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
     );
     assert!(im.exif_notes.is_empty(), "{:?}", im.exif_notes);
     // Linear: value / 65535, no transfer curve.
-    let img = workbench::photo::load_linear_rgb(&d.join("a.tiff"), None).unwrap();
+    let img = workbench::formats::photo::load_linear_rgb(&d.join("a.tiff"), None).unwrap();
     for (k, (&a, &b)) in img.data.iter().zip(&px).enumerate().step_by(97) {
         assert!(
             (a as f64 - b as f64 / 65535.0).abs() < 1e-6,

@@ -1,8 +1,8 @@
 //! Camera model and sphere geometry under perspective, against independent constructions.
 
 use nalgebra::{Vector2, Vector3};
+use workbench::camera::sphere::{angles, Sphere};
 use workbench::camera::{Camera, Distortion};
-use workbench::sphere::{angles, Sphere};
 
 fn camera(d: Distortion) -> Camera {
     // f = 1600 px keeps the whole 1280×960 frame inside the one-to-one region of k1 = −0.5

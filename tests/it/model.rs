@@ -6,12 +6,12 @@
 use crate::common;
 use common::{close, derivative};
 use nalgebra::Vector3;
-use workbench::cdrf::Convolution;
-use workbench::fresnel;
+use workbench::model::cdrf::Convolution;
+use workbench::model::fresnel;
+use workbench::model::specular::{ggx_d, lobe, smith_g1};
 use workbench::model::{
     idx, Geometry, LightAngles, Material, Model, Params, SpecularParams, N_PARAMS, PARAM_NAMES,
 };
-use workbench::specular::{ggx_d, lobe, smith_g1};
 
 #[test]
 fn fresnel_derivatives() {
@@ -251,7 +251,7 @@ fn model_gradient_matches_finite_differences() {
                 for k in 0..N_PARAMS {
                     // With the entry transmission the tolerance is 1e-5 and η's step larger: the
                     // series' coefficients are a projection with large alternating weights
-                    // (src/entry.rs) whose rounding leaves ~4e-11 of noise in the value — 2e-7 in
+                    // (src/model/entry.rs) whose rounding leaves ~4e-11 of noise in the value — 2e-7 in
                     // an η difference quotient at h 1e-4, 4e-8 at h 1e-3 (measured).
                     let (h, rel, abs) = match (entry_fresnel, k == idx::ETA) {
                         (true, true) => (1e-3, 1e-5, 1e-7),
@@ -315,8 +315,9 @@ fn entry_transmission_blur_matches_quadrature() {
         for sigma in [0.03, 0.1, 0.3, 0.9, 2.0] {
             for i in 0..=36 {
                 let th = std::f64::consts::PI * i as f64 / 36.0;
-                let s = workbench::entry::series(eta);
-                let closed = workbench::cdrf::eval_series(th, sigma, &s, Convolution::Wrapped);
+                let s = workbench::model::entry::series(eta);
+                let closed =
+                    workbench::model::cdrf::eval_series(th, sigma, &s, Convolution::Wrapped);
                 let quad = blurred_transmitted_cosine(th, sigma, eta);
                 worst = worst.max((closed.f.value - quad).abs());
             }
@@ -355,8 +356,8 @@ fn model_pieces_are_what_the_readme_says() {
     assert!(w > 0.0 && s > 1.0);
     for c in 0..3 {
         let sigma = p.material.sigma0_mm[c] / 20.0 * (25.0f64 / 20.0).powf(q);
-        let f = (1.0 - w) * workbench::cdrf::value(th, sigma, Convolution::Wrapped)
-            + w * workbench::cdrf::value(th, s * sigma, Convolution::Wrapped);
+        let f = (1.0 - w) * workbench::model::cdrf::value(th, sigma, Convolution::Wrapped)
+            + w * workbench::model::cdrf::value(th, s * sigma, Convolution::Wrapped);
         let a = p.material.albedo[c] * (b * (25.0 / 20.0 - 1.0)).exp();
         assert!((out[c] - a * t * f).abs() < 1e-15);
         let entry = Model {

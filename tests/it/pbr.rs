@@ -5,9 +5,9 @@
 use crate::common;
 
 use nalgebra::{Vector2, Vector3};
+use workbench::camera::sphere::Sphere;
 use workbench::camera::Camera;
-use workbench::intrinsics::IntrinsicsFile;
-use workbench::sphere::Sphere;
+use workbench::formats::intrinsics::IntrinsicsFile;
 use workbench::synth::dielectric::Boundary;
 use workbench::synth::volpath::{self, Medium, Scene};
 
@@ -174,9 +174,11 @@ fn renders_the_jade_session_as_mitsuba_did() {
             },
         };
         let ours = volpath::render(&cam, &scene, spp, 1, 0).mean();
-        let theirs =
-            workbench::photo::load_linear_rgb(&dir.join(img["file"].as_str().unwrap()), Some(true))
-                .unwrap();
+        let theirs = workbench::formats::photo::load_linear_rgb(
+            &dir.join(img["file"].as_str().unwrap()),
+            Some(true),
+        )
+        .unwrap();
         let o = |i: usize, c: usize| ours[i][c] * scale;
         let t = |i: usize, c: usize| theirs.data[3 * i + c] as f64;
         // 3 px inset: theirs was resampled through the distortion.

@@ -30,12 +30,12 @@ fn exif_orientation_is_applied() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("o.jpg");
     jpeg_with_orientation(&p, 1);
-    let g = workbench::photo::load_gray8(&p).unwrap();
+    let g = workbench::formats::photo::load_gray8(&p).unwrap();
     assert_eq!((g.width, g.height), (40, 20));
     assert!(g.data[20 * 40 / 2 + 2] < 40 && g.data[20 * 40 / 2 + 37] > 215);
     // 6: rotate 90° clockwise to display — the left (black) half becomes the top.
     jpeg_with_orientation(&p, 6);
-    let g = workbench::photo::load_gray8(&p).unwrap();
+    let g = workbench::formats::photo::load_gray8(&p).unwrap();
     assert_eq!((g.width, g.height), (20, 40));
     assert!(g.data[2 * 20 + 10] < 40, "top is black");
     assert!(g.data[37 * 20 + 10] > 215, "bottom is white");
@@ -51,8 +51,8 @@ fn sixteen_bit_png_loads_as_grey() {
             [v, v, v]
         })
         .collect();
-    workbench::photo::write_png16_rgb(&p, 8, 8, &rgb).unwrap();
-    let g = workbench::photo::load_gray8(&p).unwrap();
+    workbench::formats::photo::write_png16_rgb(&p, 8, 8, &rgb).unwrap();
+    let g = workbench::formats::photo::load_gray8(&p).unwrap();
     assert_eq!((g.width, g.height), (8, 8));
     assert_eq!((g.data[0], g.data[7]), (0, 255));
 }
@@ -62,9 +62,11 @@ fn bad_files_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("notes.jpg");
     std::fs::write(&p, "plain text, not a photo").unwrap();
-    let e = workbench::photo::load_gray8(&p).unwrap_err().to_string();
+    let e = workbench::formats::photo::load_gray8(&p)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("notes.jpg") && !e.contains('\n'), "{e}");
-    let e = workbench::photo::load_gray8(&dir.path().join("missing.png"))
+    let e = workbench::formats::photo::load_gray8(&dir.path().join("missing.png"))
         .unwrap_err()
         .to_string();
     assert!(e.contains("missing.png: No such file"), "{e}");
@@ -76,19 +78,19 @@ fn linear_loading_decodes_srgb_and_flags_saturation() {
     // 8-bit sRGB JPEG-free path: an 8-bit PNG with codes 0, 128, 255.
     let p = dir.path().join("s.png");
     let data: Vec<u8> = [0u8, 128, 255].iter().flat_map(|&v| [v, v, v]).collect();
-    workbench::photo::write_8bit(&p, 3, 1, 3, &data, 0, None).unwrap();
-    let img = workbench::photo::load_linear_rgb(&p, None).unwrap();
+    workbench::formats::photo::write_8bit(&p, 3, 1, 3, &data, 0, None).unwrap();
+    let img = workbench::formats::photo::load_linear_rgb(&p, None).unwrap();
     assert_eq!(img.bits, 8);
-    let expect = workbench::photo::srgb_decode(128.0 / 255.0) as f32;
+    let expect = workbench::formats::photo::srgb_decode(128.0 / 255.0) as f32;
     assert!((img.data[3] - expect).abs() < 1e-6 && img.data[0] == 0.0 && img.data[6] == 1.0);
     assert_eq!(img.saturated, [false, false, true]);
     // Declared linear: no transfer curve.
-    let img = workbench::photo::load_linear_rgb(&p, Some(true)).unwrap();
+    let img = workbench::formats::photo::load_linear_rgb(&p, Some(true)).unwrap();
     assert!((img.data[3] - 128.0 / 255.0).abs() < 1e-6);
     // 16-bit: linear by default.
     let q = dir.path().join("l.png");
-    workbench::photo::write_png16_rgb(&q, 2, 1, &[0, 0, 0, 32768, 65535, 65535]).unwrap();
-    let img = workbench::photo::load_linear_rgb(&q, None).unwrap();
+    workbench::formats::photo::write_png16_rgb(&q, 2, 1, &[0, 0, 0, 32768, 65535, 65535]).unwrap();
+    let img = workbench::formats::photo::load_linear_rgb(&q, None).unwrap();
     assert_eq!(img.bits, 16);
     assert!((img.data[3] - 0.5).abs() < 1e-4 && img.data[5] == 1.0);
     assert_eq!(img.saturated, [false, true]);

@@ -5,12 +5,12 @@ use crate::common;
 use common::wb;
 use nalgebra::Vector3;
 use std::path::Path;
-use workbench::lut::{FitMaterial, Lut};
-use workbench::mesh::{shapes, Mesh, Unit};
 use workbench::model::{LightAngles, Model};
-use workbench::render::{render, Pinhole, Samples, Scene, Shading};
-use workbench::render_check::{compare, predict};
-use workbench::render_job::{shader, table, TableSize};
+use workbench::render::check::{compare, predict};
+use workbench::render::job::{shader, table, TableSize};
+use workbench::render::lut::{FitMaterial, Lut};
+use workbench::render::mesh::{shapes, Mesh, Unit};
+use workbench::render::raster::{render, Pinhole, Samples, Scene, Shading};
 use workbench::synth::session::SessionConfig;
 
 fn wax() -> FitMaterial {
@@ -69,7 +69,7 @@ fn lambert_is_the_zero_blur_model() {
         &fm,
         &params,
         &cam,
-        &workbench::sphere::Sphere::new(centre, 20.0),
+        &workbench::camera::sphere::Sphere::new(centre, 20.0),
     );
     let (mut sq, mut rsq, mut dark_past_terminator) = (0.0, 0.0, 0);
     for (k, (a, b)) in img.rgb.iter().zip(&want.rgb).enumerate() {
@@ -196,7 +196,7 @@ fn lut_files_round_trip() {
     let fm = wax();
     let t = table(&fm, TableSize::Fixed(65, 33), None).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let paths = workbench::lut::write(
+    let paths = workbench::render::lut::write(
         &dir.path().join("wax"),
         &t.lut,
         &fm,
@@ -205,7 +205,7 @@ fn lut_files_round_trip() {
         None,
     )
     .unwrap();
-    let side: workbench::lut::LutJson =
+    let side: workbench::render::lut::LutJson =
         serde_json::from_str(&std::fs::read_to_string(&paths[2]).unwrap()).unwrap();
     assert_eq!(side.schema, "workbench.lut/1");
     assert_eq!((side.n_cos, side.n_kappa), (65, 33));

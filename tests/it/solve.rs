@@ -6,8 +6,8 @@ use crate::common;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use workbench::joint::{Extensions, LightFit, Reduction};
-use workbench::solve::{self, ExtensionChoice, FitFile, Method, Options};
+use workbench::fit::joint::{Extensions, LightFit, Reduction};
+use workbench::fit::solve::{self, ExtensionChoice, FitFile, Method, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// A 640×480 camera: a quarter of the default's pixels, so that the tests stay fast.
@@ -511,7 +511,7 @@ fn figures_are_written_and_redrawn_from_fit_json() {
     assert!(!index.contains("http"), "index.html links outside");
     // Redrawn from fit.json without solving: the same pictures, byte for byte.
     let again = dir.join("replot");
-    let files = workbench::fitplot::replot(&fit_path, &again, true).unwrap();
+    let files = workbench::figures::fitplot::replot(&fit_path, &again, true).unwrap();
     for file in files
         .iter()
         .filter(|p| p.extension().is_some_and(|e| e == "png"))
@@ -526,7 +526,7 @@ fn figures_are_written_and_redrawn_from_fit_json() {
     // A fit.json that is not one: refused with the file named.
     let bad = dir.join("not-a-fit.json");
     std::fs::write(&bad, r#"{"schema": "workbench.fit/0"}"#).unwrap();
-    let e = workbench::fitplot::replot(&bad, &dir.join("never"), true)
+    let e = workbench::figures::fitplot::replot(&bad, &dir.join("never"), true)
         .unwrap_err()
         .to_string();
     assert!(e.contains("not-a-fit.json") && !e.contains('\n'), "{e}");

@@ -5,8 +5,8 @@ use crate::common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
+use workbench::fit::solver::{self, from_unbounded, to_unbounded, Obs, Prior, Problem};
 use workbench::model::{idx, Geometry, Model, Params, SpecularParams, N_PARAMS};
-use workbench::solver::{self, from_unbounded, to_unbounded, Obs, Prior, Problem};
 
 /// The plain model's parameters free, η and the extensions held.
 fn plain_free() -> [bool; N_PARAMS] {
@@ -248,7 +248,7 @@ fn pooled_cells_fit_like_every_pixel_and_the_predicted_shift_says_how_far() {
     let free = plain_free();
     let full = solver::fit(Model::default(), &obs, &p, free, &[]);
     let l = p.light.direction();
-    let mut pooled = workbench::reduce::Pooled::new(l, (3.0f64 * 0.1).atan());
+    let mut pooled = workbench::fit::reduce::Pooled::new(l, (3.0f64 * 0.1).atan());
     for (k, chunk) in obs.chunks(per).enumerate() {
         pooled.add_sphere(k, chunk, None);
     }

@@ -3,9 +3,9 @@
 
 use nalgebra::{Rotation3, Vector2, Vector3};
 use std::path::Path;
+use workbench::camera::sphere::Sphere;
 use workbench::camera::{Camera, Distortion};
 use workbench::model::{Geometry, LightAngles, Model, Params};
-use workbench::sphere::Sphere;
 use workbench::synth::checkerboard::{self, CheckerConfig};
 use workbench::synth::session::{self, Format, Layout, SessionConfig};
 
@@ -79,7 +79,7 @@ fn session_files_carry_the_documented_fields() {
     assert_eq!(s["images"][1]["spheres"][0]["radius_mm"], 15.0);
     assert_eq!(s["images"][0]["exposure"], 1.2);
     // The session loads through the library's own validation.
-    let (loaded, _) = workbench::session::Session::load(dir.path()).unwrap();
+    let (loaded, _) = workbench::formats::session::Session::load(dir.path()).unwrap();
     assert_eq!(loaded.images.len(), 3);
 
     let t = json(&out.truth_file);
@@ -103,7 +103,8 @@ fn session_files_carry_the_documented_fields() {
     assert_eq!(sph["center_mm"].as_array().unwrap().len(), 3);
     assert!(sph["ellipse"]["axes_px"][0].as_f64().unwrap() > 10.0);
     let intr =
-        workbench::intrinsics::IntrinsicsFile::load(&dir.path().join("intrinsics.json")).unwrap();
+        workbench::formats::intrinsics::IntrinsicsFile::load(&dir.path().join("intrinsics.json"))
+            .unwrap();
     assert_eq!(intr.camera(), cfg.camera);
 }
 
@@ -293,7 +294,7 @@ fn jpeg_carries_exif_that_kamadak_exif_reads() {
         .to_string();
     assert!(make.contains("workbench"), "{make}");
     // The library's own reader gives the same relative exposure.
-    let info = workbench::photo::ExifInfo::read(&out.images[0])
+    let info = workbench::formats::photo::ExifInfo::read(&out.images[0])
         .unwrap()
         .unwrap();
     assert!((info.relative_exposure().unwrap() - 2.0).abs() < 1e-6);
@@ -303,7 +304,7 @@ fn jpeg_carries_exif_that_kamadak_exif_reads() {
         .is_none());
     // 8-bit sRGB: background decodes to the ambient floor (within quantisation and noise).
     let img = image::open(&out.images[0]).unwrap().into_rgb8();
-    let v = workbench::photo::srgb_decode(img.get_pixel(5, 5)[1] as f64 / 255.0);
+    let v = workbench::formats::photo::srgb_decode(img.get_pixel(5, 5)[1] as f64 / 255.0);
     assert!((v - cfg.ambient).abs() < 3e-3, "{v}");
 }
 

@@ -5,7 +5,7 @@ use crate::common;
 
 use nalgebra::Vector3;
 use std::path::Path;
-use workbench::solve::{self, FitFile, Options};
+use workbench::fit::solve::{self, FitFile, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// One synthetic session (640×480, five radii, 1% noise) for a noise seed. At 320×240 (spheres
@@ -28,7 +28,7 @@ fn solve(dir: &Path, f: impl FnOnce(&mut Options)) -> FitFile {
     solve::run(&o).unwrap()
 }
 
-fn param<'a>(f: &'a FitFile, name: &str) -> &'a workbench::solve::ParamJson {
+fn param<'a>(f: &'a FitFile, name: &str) -> &'a workbench::fit::solve::ParamJson {
     f.parameters.iter().find(|p| p.name == name).unwrap()
 }
 
@@ -185,7 +185,7 @@ fn jade_errors_are_covered_or_flagged() {
         f.std.light_deg
     );
     assert!(
-        pull.pull < workbench::joint::PULL_WARN,
+        pull.pull < workbench::fit::joint::PULL_WARN,
         "pull {}",
         pull.pull
     );
@@ -249,7 +249,7 @@ fn pbr_session_defaults(name: &str, expect_held: bool, heldout_measured: [f64; 5
         .iter()
         .any(|n| n.contains("the light is held at the highlights' estimate"));
     assert_eq!(
-        pull.pull > workbench::joint::PULL_WARN,
+        pull.pull > workbench::fit::joint::PULL_WARN,
         light_held,
         "pull {}",
         pull.pull

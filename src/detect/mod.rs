@@ -1,0 +1,823 @@
+//! `workbench detect <session>/`: find every sphere of every photo, its highlight, and the light
+//! direction; write `detections.json` (schema `workbench.detections/1`) and an overlay per photo.
+//!
+//! Per photo: the background level and noise (median, MAD) → a mask of what is clearly brighter →
+//! connected blobs, of which the ones carrying at least 5% of the largest one's light are the
+//! spheres, left to right in the order `session.json` lists them → per sphere, edge points,
+//! RANSAC outline and edge-model refinement ([`crate::detect::silhouette`]) → the highlight and its light
+//! ([`crate::detect::highlight`]). Lights are combined per photo and, unless the session says
+//! `"light": "per-image"`, over the whole session ([`crate::detect::highlight::combine_highlights`]).
+//! Photos are processed in parallel (rayon); detection uses no OpenCV.
+
+pub mod highlight;
+pub mod overlay;
+pub mod silhouette;
+
+use crate::camera::outline::{Outline, Projection};
+use crate::camera::sphere::EllipseJson;
+use crate::error::{Error, Result};
+use crate::fit::samples::{self, Counts};
+use crate::formats::photo::{load_linear_rgb, LinearRgb};
+use crate::formats::session::{self, LightMode, Session};
+use crate::model::LightAngles;
+use highlight::{Highlight, Method};
+use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use silhouette::{blobs, Plane};
+use std::path::{Path, PathBuf};
+
+pub const SCHEMA: &str = "workbench.detections/1";
+
+/// Floor on a single light estimate's uncertainty when combining (radians): the modelling error
+/// the per-fit statistics do not see.
+/// The band of pixels the edge model fits: this far inside and outside the silhouette (px).
+pub const BAND_INNER_PX: f64 = 4.0;
+pub const BAND_OUTER_PX: f64 = 3.0;
+
+pub const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
+
+/// A fitted outline, as stored.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum OutlineJson {
+    /// Perspective: the tangent cone (unit axis toward the centre, half-angle).
+    Cone { axis: [f64; 3], half_angle_deg: f64 },
+    /// Orthographic: a circle in pixels.
+    Circle { center_px: [f64; 2], radius_px: f64 },
+}
+
+impl From<&Outline> for OutlineJson {
+    fn from(o: &Outline) -> Self {
+        match o {
+            Outline::Cone { axis, half_angle } => OutlineJson::Cone {
+                axis: [axis.x, axis.y, axis.z],
+                half_angle_deg: half_angle.to_degrees(),
+            },
+            Outline::Circle { center, radius } => OutlineJson::Circle {
+                center_px: [center.x, center.y],
+                radius_px: *radius,
+            },
+        }
+    }
+}
+
+impl OutlineJson {
+    pub fn outline(&self) -> Outline {
+        match *self {
+            OutlineJson::Cone {
+                axis,
+                half_angle_deg,
+            } => Outline::Cone {
+                axis: Vector3::from(axis).normalize(),
+                half_angle: half_angle_deg.to_radians(),
+            },
+            OutlineJson::Circle {
+                center_px,
+                radius_px,
+            } => Outline::Circle {
+                center: Vector2::from(center_px),
+                radius: radius_px,
+            },
+        }
+    }
+}
+
+/// The highlight of one sphere.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HighlightJson {
+    pub method: Method,
+    /// Fitted GGX roughness (lobe fit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<f64>,
+    pub saturated_px: usize,
+    /// Angular radius around the mirror direction whose pixels are flagged as highlight.
+    pub radius_deg: f64,
+    /// Left out of the combined light (more than 5σ from the others).
+    pub outlier: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SphereDetection {
+    pub radius_mm: f64,
+    /// Silhouette in ideal (undistorted pinhole) pixels.
+    pub ellipse: EllipseJson,
+    pub center_mm: Option<[f64; 3]>,
+    pub outline: OutlineJson,
+    /// 1-σ of the outline's centre (x, y) and radius, px.
+    pub silhouette_std_px: [f64; 3],
+    /// Fitted edge blur (Gaussian σ, px) beyond the pixel footprint.
+    pub silhouette_blur_px: f64,
+    /// Photos the silhouette was fitted over (more than 1: the sphere stayed put between them).
+    pub silhouette_photos: usize,
+    pub edge_points: usize,
+    pub edge_inliers: usize,
+    pub highlight_px: Option<[f64; 2]>,
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    pub highlight: Option<HighlightJson>,
+    /// Why no highlight was used, when none was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_highlight: Option<String>,
+    pub samples: Counts,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImageDetection {
+    pub file: String,
+    pub width: u32,
+    pub height: u32,
+    /// Relative exposure dividing the samples' radiance (null: unknown).
+    pub exposure: Option<f64>,
+    /// What the EXIF reader lost, substituted or ignored, one line each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exif_notes: Vec<String>,
+    /// Combined over this photo's spheres.
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    pub spheres: Vec<SphereDetection>,
+    /// The overlay picture, relative to detections.json.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlay: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Detections {
+    pub schema: String,
+    /// The session file, as given.
+    pub session: String,
+    /// "perspective" (with intrinsics) or "orthographic" (none given).
+    pub projection: String,
+    pub light: LightMode,
+    /// Combined over the session (null under `"light": "per-image"` or without highlights).
+    pub light_direction: Option<[f64; 3]>,
+    pub light_std_deg: Option<f64>,
+    /// Azimuth and elevation of the combined light (degrees; see `model::LightAngles`).
+    pub light_azimuth_deg: Option<f64>,
+    pub light_elevation_deg: Option<f64>,
+    pub images: Vec<ImageDetection>,
+    pub seconds: f64,
+}
+
+/// A sphere's silhouette as found in one photo (or fitted over several).
+#[derive(Clone, Debug)]
+pub struct Silhouette {
+    pub radius_mm: f64,
+    pub outline: Outline,
+    pub std_px: [f64; 3],
+    pub blur_px: f64,
+    /// Photos the outline was fitted over (more than one: a sphere that stayed put).
+    pub photos: usize,
+    /// Noise level of the photo (luminance units).
+    pub noise: f64,
+    pub edge_points: usize,
+    pub inlier_px: Vec<Vector2<f64>>,
+}
+
+/// Everything found on one sphere, before serialisation.
+#[derive(Clone, Debug)]
+pub struct Found {
+    pub silhouette: Silhouette,
+    /// The highlight, or why there is none.
+    pub highlight: std::result::Result<Highlight, String>,
+}
+
+/// Locate the highlight on every sphere of a photo (once its outlines are final).
+pub fn locate_highlights(
+    img: &LinearRgb,
+    lum: &Plane,
+    proj: &Projection,
+    spheres: Vec<Silhouette>,
+) -> Vec<Found> {
+    spheres
+        .into_iter()
+        .map(|s| Found {
+            highlight: highlight::find(lum, &img.saturated, proj, &s.outline, s.noise)
+                .map_err(|e| e.0),
+            silhouette: s,
+        })
+        .collect()
+}
+
+/// The backdrop of a photo: a level per band of 16 rows plus a quadratic across the image,
+/// fitted to the medians of 16×16 pixel cells, the cells that stand out of it (spheres, their
+/// shadows) left out in turn; the noise is 1.4826·MAD of the pixels about it (sampled). On a black
+/// void it is the floor's constant; on a grey card it follows the gradient, on a table before a
+/// wall the step between them (a horizontal edge: a band's level), so that a sphere is what differs
+/// from its surroundings, not what is brighter than the photo's median.
+pub struct Backdrop {
+    rows: Vec<f64>,
+    across: [f64; 2],
+    width: f64,
+    pub noise: f64,
+}
+
+const BACKDROP_CELL: u32 = 16;
+
+impl Backdrop {
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        let band = ((y.max(0.0) as u32 / BACKDROP_CELL) as usize).min(self.rows.len() - 1);
+        let u = x / self.width - 0.5;
+        self.rows[band] + self.across[0] * u + self.across[1] * (u * u - 1.0 / 12.0)
+    }
+
+    pub fn of(lum: &Plane) -> Backdrop {
+        const CELL: u32 = BACKDROP_CELL;
+        let (w, h) = (lum.width, lum.height);
+        let (nx, ny) = (w.div_ceil(CELL) as usize, h.div_ceil(CELL) as usize);
+        let mut cells = vec![];
+        for cy in 0..ny as u32 {
+            for cx in 0..nx as u32 {
+                let mut v: Vec<f32> = (cy * CELL..((cy + 1) * CELL).min(h))
+                    .flat_map(|y| (cx * CELL..((cx + 1) * CELL).min(w)).map(move |x| (x, y)))
+                    .map(|(x, y)| lum.at(x, y))
+                    .collect();
+                let k = v.len() / 2;
+                let m = *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
+                let x = ((cx * CELL) as f64 + 0.5 * CELL as f64).min(w as f64 - 1.0);
+                cells.push((x, cy as usize, m));
+            }
+        }
+        let median = |v: Vec<f64>| crate::stats::percentile(v, 0.5);
+        let all = median(cells.iter().map(|c| c.2).collect());
+        let mut b = Backdrop {
+            rows: vec![all; ny],
+            across: [0.0, 0.0],
+            width: w as f64,
+            noise: 0.0,
+        };
+        let mut keep = vec![true; cells.len()];
+        let basis = |x: f64, width: f64| {
+            let u = x / width - 0.5;
+            [u, u * u - 1.0 / 12.0]
+        };
+        for _round in 0..8 {
+            // The level of each band from its kept cells, or from all of them where a sphere
+            // covers most of the band.
+            for band in 0..ny {
+                let of = |only_kept: bool| -> Vec<f64> {
+                    cells
+                        .iter()
+                        .zip(&keep)
+                        .filter(|((_, cb, _), &k)| *cb == band && (k || !only_kept))
+                        .map(|(&(x, _, m), _)| {
+                            let q = basis(x, b.width);
+                            m - b.across[0] * q[0] - b.across[1] * q[1]
+                        })
+                        .collect()
+                };
+                let kept = of(true);
+                b.rows[band] = median(if 4 * kept.len() >= nx {
+                    kept
+                } else {
+                    of(false)
+                });
+            }
+            // The gradient across, from what the bands leave.
+            let mut ata = nalgebra::Matrix2::<f64>::zeros();
+            let mut atb = nalgebra::Vector2::<f64>::zeros();
+            for (&(x, band, m), _) in cells.iter().zip(&keep).filter(|(_, &k)| k) {
+                let q = nalgebra::Vector2::from(basis(x, b.width));
+                ata += q * q.transpose();
+                atb += q * (m - b.rows[band]);
+            }
+            if let Some(inv) = ata.try_inverse() {
+                b.across = (inv * atb).into();
+            }
+            let res: Vec<f64> = cells
+                .iter()
+                .map(|&(x, band, m)| m - b.at(x, (band as u32 * CELL) as f64))
+                .collect();
+            let mad = crate::stats::robust_sigma(
+                res.iter()
+                    .zip(&keep)
+                    .filter(|(_, &k)| k)
+                    .map(|(r, _)| r.abs())
+                    .collect(),
+            );
+            // Cells more than 3 MADs (and 1% of full scale) off the surface are not backdrop.
+            let lim = (3.0 * mad).max(0.01);
+            keep = res.iter().map(|r| r.abs() <= lim).collect();
+        }
+        // Pixel noise about the surface, from pixels of the cells kept.
+        let step = (lum.data.len() / 200_000).max(1);
+        let mut dev: Vec<f64> = (0..lum.data.len())
+            .step_by(step)
+            .filter_map(|i| {
+                let (x, y) = (i as u32 % w, i as u32 / w);
+                let cell = (y / CELL) as usize * nx + (x / CELL) as usize;
+                keep[cell].then(|| (lum.data[i] as f64 - b.at(x as f64, y as f64)).abs())
+            })
+            .collect();
+        if dev.is_empty() {
+            dev.push(0.0);
+        }
+        b.noise = crate::stats::robust_sigma(dev);
+        b
+    }
+}
+
+/// Luminance plane of a linear photo.
+pub fn luminance(img: &LinearRgb) -> Plane {
+    Plane {
+        width: img.width,
+        height: img.height,
+        data: img
+            .data
+            .chunks_exact(3)
+            .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+            .collect(),
+    }
+}
+
+/// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
+/// session). `lum` is the photo's [`luminance`].
+pub fn find_spheres(
+    img: &LinearRgb,
+    lum: &Plane,
+    proj: &Projection,
+    spheres: &[crate::formats::session::SessionSphere],
+    path: &Path,
+) -> Result<Vec<Silhouette>> {
+    let radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    let hints: Option<Vec<([f64; 2], f64)>> = spheres.iter().map(|s| s.hint()).collect();
+    let backdrop = Backdrop::of(lum);
+    let noise = backdrop.noise;
+    let w = lum.width as usize;
+    // Each pixel's excess over the backdrop under it.
+    let excess: Vec<f32> = lum
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| (v as f64 - backdrop.at((i % w) as f64, (i / w) as f64)).max(0.0) as f32)
+        .collect();
+    let mut top: Vec<f32> = excess
+        .iter()
+        .step_by((lum.data.len() / 200_000).max(1))
+        .cloned()
+        .collect();
+    top.sort_by(|a, b| a.total_cmp(b));
+    let p999 = top[((top.len() as f64 * 0.999) as usize).min(top.len() - 1)] as f64;
+    let thr = (8.0 * noise).max(0.03 * p999);
+    let mask: Vec<bool> = excess.iter().map(|&v| v as f64 > thr).collect();
+    let mut found: Vec<_> = match &hints {
+        // Where the user said to look: a disc of the hinted size, searched in its own box.
+        Some(h) => {
+            let mut v = vec![];
+            for &(c, r) in h {
+                if !(c[0] >= 0.0
+                    && c[1] >= 0.0
+                    && c[0] < img.width as f64
+                    && c[1] < img.height as f64)
+                {
+                    return Err(Error::invalid(
+                        path,
+                        format!(
+                            "center_px ({:.0}, {:.0}) lies outside the {}×{} photo",
+                            c[0], c[1], img.width, img.height
+                        ),
+                    ));
+                }
+                let clamp = |v: f64, hi: u32| v.clamp(0.0, (hi - 1) as f64) as u32;
+                v.push(crate::detect::silhouette::Blob {
+                    area: (std::f64::consts::PI * r * r) as usize,
+                    centroid: Vector2::new(c[0], c[1]),
+                    bbox: [
+                        clamp(c[0] - r, img.width),
+                        clamp(c[1] - r, img.height),
+                        clamp(c[0] + r, img.width),
+                        clamp(c[1] + r, img.height),
+                    ],
+                    extent: r,
+                    mass: std::f64::consts::PI * r * r,
+                });
+            }
+            v
+        }
+        None => {
+            let all = blobs(&mask, img.width, img.height, Some(&excess));
+            let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
+            all.into_iter()
+                // A sphere stands well out of the backdrop; a patch of backdrop the surface does
+                // not follow (a table's edge against the wall) only just crosses the threshold.
+                .filter(|b| {
+                    b.mass >= 0.05 * biggest && b.area >= 30 && b.mass >= 4.0 * thr * b.area as f64
+                })
+                .collect()
+        }
+    };
+    // More blobs than spheres: the least disc-like go (a pin or stand under a sphere, a cable) —
+    // a disc fills π·extent² about its centroid, a pin a few percent of it. Only past 30%: a lit
+    // crescent of a back-lit sphere fills less than a disc, and is still a sphere.
+    if found.len() > radii.len() {
+        let fill = |b: &crate::detect::silhouette::Blob| {
+            b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0)
+        };
+        found.sort_by(|a, b| fill(b).total_cmp(&fill(a)));
+        while found.len() > radii.len() && found.last().is_some_and(|b| fill(b) < 0.3) {
+            found.pop();
+        }
+    }
+    if found.len() != radii.len() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "found {} sphere(s), session.json lists {} for this photo",
+                found.len(),
+                radii.len()
+            ),
+        ));
+    }
+    if let Some(b) = found
+        .iter()
+        .find(|b| b.touches_border(img.width, img.height))
+    {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "a sphere touches the frame border near pixel ({:.0}, {:.0}): its silhouette is cut",
+                b.centroid.x, b.centroid.y
+            ),
+        ));
+    }
+    // Left to right, as session.json lists them (hinted spheres are where the hints say).
+    if hints.is_none() {
+        found.sort_by(|a, b| a.centroid.x.total_cmp(&b.centroid.x));
+    }
+    let mut out = vec![];
+    for (b, &radius_mm) in found.iter().zip(&radii) {
+        let pad = if hints.is_some() {
+            (0.4 * b.extent).ceil() as u32 + 4
+        } else {
+            b.extent.ceil() as u32 + 4
+        };
+        let region = [
+            b.bbox[0].saturating_sub(pad),
+            b.bbox[1].saturating_sub(pad),
+            (b.bbox[2] + pad).min(img.width - 1),
+            (b.bbox[3] + pad).min(img.height - 1),
+        ];
+        let mut inside: Vec<f64> = (b.bbox[1]..=b.bbox[3])
+            .flat_map(|y| (b.bbox[0]..=b.bbox[2]).map(move |x| (x, y)))
+            .filter(|&(x, y)| mask[(y * img.width + x) as usize])
+            .map(|(x, y)| excess[(y * img.width + x) as usize] as f64)
+            .collect();
+        inside.sort_by(|a, b| a.total_cmp(b));
+        let Some(&level) = inside.get(inside.len() * 9 / 10) else {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "nothing brighter than the backdrop near pixel ({:.0}, {:.0}): no sphere there",
+                    b.centroid.x, b.centroid.y
+                ),
+            ));
+        };
+        // The sphere's own noise (shot noise grows with the level, so the background's says
+        // little about it): 1.4826 × MAD / √2 of horizontal neighbour differences inside the
+        // blob. A Sobel component of white noise σ has σ·√12/8 ≈ 0.43σ: 2.5σ keeps false edges
+        // inside the sphere below one in a million pixels.
+        let diffs: Vec<f64> = (b.bbox[1]..=b.bbox[3])
+            .flat_map(|y| (b.bbox[0]..b.bbox[2]).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                mask[(y * img.width + x) as usize] && mask[(y * img.width + x + 1) as usize]
+            })
+            .map(|(x, y)| (lum.at(x + 1, y) as f64 - lum.at(x, y) as f64).abs())
+            .collect();
+        // A difference of two pixels has √2 times a pixel's noise.
+        let inner_noise = if diffs.is_empty() {
+            0.0
+        } else {
+            crate::stats::robust_sigma(diffs) / std::f64::consts::SQRT_2
+        };
+        let threshold = (5.0 * noise).max(2.5 * inner_noise).max(0.03 * level);
+        let mut edges = silhouette::edge_points(lum, region, threshold, proj);
+        // With a hint, only edges near the hinted rim: a close neighbour's are not this sphere's.
+        let range = if hints.is_some() {
+            edges.retain(|e| {
+                let d = (e.px - b.centroid).norm();
+                d > 0.6 * b.extent && d < 1.4 * b.extent
+            });
+            (0.8 * b.extent, 1.25 * b.extent)
+        } else {
+            // The blob's size: its farthest pixel, unless something thin hangs on it (a pin
+            // under the sphere), when its area says better.
+            let size = b
+                .extent
+                .min(1.5 * (b.area as f64 / std::f64::consts::PI).sqrt());
+            (0.3 * size, 2.5 * size)
+        };
+        let fail = |what: &str| {
+            Error::invalid(
+                path,
+                format!(
+                    "sphere {} of {} (r = {radius_mm} mm, near pixel ({:.0}, {:.0})): {what}",
+                    out.len() + 1,
+                    radii.len(),
+                    b.centroid.x,
+                    b.centroid.y
+                ),
+            )
+        };
+        let fit = silhouette::ransac(&edges, proj, range, 1.5, 800)
+            .ok_or_else(|| fail("no silhouette found among the edges"))?;
+        if fit.inliers.len() < 20 {
+            return Err(fail("too few silhouette edge points"));
+        }
+        let refined = silhouette::refine_repeated(
+            &[(lum, Some(&img.saturated))],
+            proj,
+            &fit.outline,
+            BAND_INNER_PX,
+            BAND_OUTER_PX,
+        )
+        .ok_or_else(|| fail("silhouette refinement failed"))?;
+        // The refinement may not wander off: it starts within a pixel of the edges.
+        let shift = fit.outline.distance_px(&refined.outline, proj);
+        let outline = if shift < (0.05 * fit.outline.radius_px(proj)).max(3.0) {
+            refined.outline
+        } else {
+            fit.outline
+        };
+        out.push(Silhouette {
+            radius_mm,
+            outline,
+            std_px: refined.std_px,
+            blur_px: refined.blur_px,
+            photos: 1,
+            noise: noise.max(1e-6),
+            edge_points: edges.len(),
+            inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
+        });
+    }
+    Ok(out)
+}
+
+/// Spheres that stayed put across the photos (same radii in every photo, outlines within 2 px):
+/// refit each outline over all photos at once. Each photo lights a different part of the rim, so
+/// the edge model's light-dependent errors average out (photometric-stereo sets). `per_image`:
+/// each photo, its luminance and its silhouettes.
+pub fn pool_static_spheres(
+    per_image: &mut [(LinearRgb, Plane, Vec<Silhouette>)],
+    proj: &Projection,
+) {
+    if per_image.len() < 2 {
+        return;
+    }
+    let radii = |fs: &[Silhouette]| fs.iter().map(|f| f.radius_mm).collect::<Vec<_>>();
+    let first = radii(&per_image[0].2);
+    if per_image.iter().any(|(_, _, fs)| radii(fs) != first) {
+        return;
+    }
+    for j in 0..first.len() {
+        let outlines: Vec<Outline> = per_image.iter().map(|(_, _, fs)| fs[j].outline).collect();
+        let Some(medoid) = outlines.iter().min_by(|a, b| {
+            let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
+            let db: f64 = outlines.iter().map(|o| b.distance_px(o, proj)).sum();
+            da.total_cmp(&db)
+        }) else {
+            continue;
+        };
+        // Static when at least three quarters of the outlines agree within 2 px; the rest are
+        // failed fits of the same sphere and get the common outline too.
+        let agree: Vec<bool> = outlines
+            .iter()
+            .map(|o| o.distance_px(medoid, proj) <= 2.0)
+            .collect();
+        if 4 * agree.iter().filter(|&&a| a).count() < 3 * outlines.len() {
+            continue;
+        }
+        let images: Vec<(&Plane, Option<&[bool]>)> = per_image
+            .iter()
+            .zip(&agree)
+            .filter(|(_, &a)| a)
+            .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
+            .collect();
+        let Some(joint) =
+            silhouette::refine_repeated(&images, proj, medoid, BAND_INNER_PX, BAND_OUTER_PX)
+        else {
+            continue;
+        };
+        if joint.outline.distance_px(medoid, proj) > 2.0 {
+            continue;
+        }
+        let n = images.len();
+        for (_, _, fs) in per_image.iter_mut() {
+            let f = &mut fs[j];
+            f.outline = joint.outline;
+            f.std_px = joint.std_px;
+            f.blur_px = joint.blur_px;
+            f.photos = n;
+        }
+    }
+}
+
+fn arr3(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Options of `workbench detect`.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub session: PathBuf,
+    /// Where detections.json goes (default: beside session.json).
+    pub out: Option<PathBuf>,
+    /// Write overlay PNGs (into `overlays/` beside detections.json).
+    pub overlays: bool,
+    pub quiet: bool,
+}
+
+/// Run detection over a session.
+pub fn run(opts: &Options) -> Result<Detections> {
+    let t0 = std::time::Instant::now();
+    let report = session::inspect(&opts.session)?;
+    let (sess, _) = Session::load(&report.session_file)?;
+    let proj = match &report.camera {
+        Some(c) => Projection::Perspective(*c),
+        None => Projection::Orthographic,
+    };
+    let out = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
+    let pb = crate::progress::bar(report.images.len() as u64, "detect", opts.quiet);
+    let per_image: Vec<Result<(LinearRgb, Plane, Vec<Silhouette>)>> = report
+        .images
+        .par_iter()
+        .zip(&sess.images)
+        .map(|(info, si)| {
+            let img = load_linear_rgb(&info.path, si.linear)?;
+            let lum = luminance(&img);
+            let f = find_spheres(&img, &lum, &proj, &si.spheres, &info.path)?;
+            pb.inc(1);
+            Ok((img, lum, f))
+        })
+        .collect();
+    pb.finish_and_clear();
+    let mut per_image: Vec<(LinearRgb, Plane, Vec<Silhouette>)> =
+        per_image.into_iter().collect::<Result<_>>()?;
+    pool_static_spheres(&mut per_image, &proj);
+    // Highlights once the outlines are final.
+    let per_image: Vec<(LinearRgb, Vec<Found>)> = per_image
+        .into_par_iter()
+        .map(|(img, lum, sil)| {
+            let found = locate_highlights(&img, &lum, &proj, sil);
+            (img, found)
+        })
+        .collect();
+    // Lights: per photo, then over the session.
+    fn est(f: &Found) -> Option<&highlight::Highlight> {
+        f.highlight.as_ref().ok()
+    }
+    let image_lights: Vec<Option<highlight::Combined>> = per_image
+        .iter()
+        .map(|(_, fs)| {
+            let e: Vec<_> = fs.iter().filter_map(est).collect();
+            highlight::combine_highlights(&e, LIGHT_FLOOR)
+        })
+        .collect();
+    let all: Vec<(usize, usize)> = per_image
+        .iter()
+        .enumerate()
+        .flat_map(|(i, (_, fs))| {
+            fs.iter()
+                .enumerate()
+                .filter(|(_, f)| f.highlight.is_ok())
+                .map(move |(j, _)| (i, j))
+        })
+        .collect();
+    let session_light = match sess.light {
+        LightMode::Shared => {
+            let e: Vec<_> = all
+                .iter()
+                .filter_map(|&(i, j)| est(&per_image[i].1[j]))
+                .collect();
+            highlight::combine_highlights(&e, LIGHT_FLOOR)
+        }
+        LightMode::PerImage => None,
+    };
+    let is_outlier = |i: usize, j: usize| -> bool {
+        match (&session_light, sess.light) {
+            (Some(c), LightMode::Shared) => all
+                .iter()
+                .position(|&p| p == (i, j))
+                .is_some_and(|k| c.outlier[k]),
+            _ => {
+                let k = per_image[i].1[..j]
+                    .iter()
+                    .filter(|f| f.highlight.is_ok())
+                    .count();
+                image_lights[i].as_ref().is_some_and(|c| c.outlier[k])
+            }
+        }
+    };
+    let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut images = vec![];
+    for (i, ((img, fs), info)) in per_image.iter().zip(&report.images).enumerate() {
+        let light_for_samples = match sess.light {
+            LightMode::Shared => session_light.as_ref().map(|c| c.light),
+            LightMode::PerImage => image_lights[i].as_ref().map(|c| c.light),
+        };
+        let spheres = fs
+            .iter()
+            .enumerate()
+            .map(|(j, f)| {
+                let hl = f.highlight.as_ref().ok();
+                let smp = samples::sphere_samples(
+                    img,
+                    info.exposure.unwrap_or(1.0),
+                    &proj,
+                    &f.silhouette.outline,
+                    f.silhouette.radius_mm,
+                    light_for_samples.as_ref(),
+                    hl.map(|h| h.radius),
+                );
+                SphereDetection {
+                    radius_mm: f.silhouette.radius_mm,
+                    ellipse: f
+                        .silhouette
+                        .outline
+                        .ellipse(&proj)
+                        .map(EllipseJson::from)
+                        .unwrap_or(EllipseJson {
+                            center_px: [f64::NAN; 2],
+                            axes_px: [f64::NAN; 2],
+                            angle_deg: f64::NAN,
+                        }),
+                    center_mm: f
+                        .silhouette
+                        .outline
+                        .center_mm(f.silhouette.radius_mm)
+                        .map(|c| arr3(&c)),
+                    outline: OutlineJson::from(&f.silhouette.outline),
+                    silhouette_std_px: f.silhouette.std_px,
+                    silhouette_blur_px: f.silhouette.blur_px,
+                    silhouette_photos: f.silhouette.photos,
+                    edge_points: f.silhouette.edge_points,
+                    edge_inliers: f.silhouette.inlier_px.len(),
+                    highlight_px: hl.map(|h| [h.px.x, h.px.y]),
+                    light_direction: hl.map(|h| arr3(&h.light)),
+                    light_std_deg: hl.map(|h| h.std().to_degrees()),
+                    highlight: hl.map(|h| HighlightJson {
+                        method: h.method,
+                        alpha: h.alpha,
+                        saturated_px: h.saturated,
+                        radius_deg: h.radius.to_degrees(),
+                        outlier: is_outlier(i, j),
+                    }),
+                    no_highlight: f.highlight.as_ref().err().cloned(),
+                    samples: samples::counts(&smp),
+                }
+            })
+            .collect();
+        let overlay = if opts.overlays {
+            let stem = Path::new(&info.file)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| format!("image{i}"));
+            let rel = format!("overlays/{stem}.png");
+            crate::detect::overlay::write(
+                &out_dir.join(&rel),
+                img,
+                &proj,
+                fs,
+                light_for_samples.as_ref(),
+            )?;
+            Some(rel)
+        } else {
+            None
+        };
+        images.push(ImageDetection {
+            file: info.file.clone(),
+            width: img.width,
+            height: img.height,
+            exposure: info.exposure,
+            exif_notes: info.exif_notes.clone(),
+            light_direction: image_lights[i].as_ref().map(|c| arr3(&c.light)),
+            light_std_deg: image_lights[i].as_ref().map(|c| c.std().to_degrees()),
+            spheres,
+            overlay,
+        });
+    }
+    let angles = session_light
+        .as_ref()
+        .map(|c| LightAngles::from_direction(&c.light));
+    let det = Detections {
+        schema: SCHEMA.into(),
+        session: report.session_file.display().to_string(),
+        projection: if proj.is_perspective() {
+            "perspective"
+        } else {
+            "orthographic"
+        }
+        .into(),
+        light: sess.light,
+        light_direction: session_light.as_ref().map(|c| arr3(&c.light)),
+        light_std_deg: session_light.as_ref().map(|c| c.std().to_degrees()),
+        light_azimuth_deg: angles.map(|a| a.azimuth.to_degrees()),
+        light_elevation_deg: angles.map(|a| a.elevation.to_degrees()),
+        images,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    crate::formats::output::write_json(&out, &det)?;
+    Ok(det)
+}

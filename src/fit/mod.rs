@@ -1,0 +1,11 @@
+//! From photos to the material: observations from the detected spheres ([`observe`], [`samples`]),
+//! pooled ([`reduce`]), fitted by least squares ([`solver`]) in the joint fit's stages ([`joint`]),
+//! beside the paper's procedure ([`paper`]), driven by the `solve` command ([`solve`]).
+
+pub mod joint;
+pub mod observe;
+pub mod paper;
+pub mod reduce;
+pub mod samples;
+pub mod solve;
+pub mod solver;

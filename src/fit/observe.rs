@@ -1,0 +1,452 @@
+//! From a session and its detections to the solver's observations: decode every photo, take the
+//! pixels of every detected sphere ([`crate::fit::samples`]), leave out the saturated ones and those
+//! that straddle the silhouette, and weight each pixel's channel by 1/σ of its noise.
+//!
+//! The noise is measured, not assumed: per sphere and channel, a shot-plus-read model
+//! σ²(L) = a + b·L fitted to the differences of horizontally adjacent unflagged pixels (the
+//! shading changes little from one pixel to the next, so these differences are noise): the pairs
+//! are binned by level, each bin's variance is (1.4826 × MAD)² / 2 (robust to the few pairs that
+//! cross an edge), and a, b come from a weighted line fit over the bins. A pixel's σ is the model
+//! at the mean level of its two row neighbours (its own value would favour pixels whose noise
+//! happened to be negative).
+//!
+//! Pixels whose row neighbours lie within 3σ of full scale are left out with the clipped ones: near
+//! clipping the noise is censored and what remains averages low.
+//!
+//! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
+//! pixels away from the spheres ([`background`]) and subtracted from every sample; where those
+//! pixels are lit, none is measured ([`SphereData::floor`] `None`) and the joint fit fits it
+//! ([`crate::fit::solver::fit_with_floor`]).
+
+use crate::camera::outline::Projection;
+use crate::detect::Detections;
+use crate::error::{Error, Result};
+use crate::fit::samples::{self, Sample};
+use crate::fit::solver::Obs;
+use crate::formats::photo::load_linear_rgb;
+use crate::formats::session::{Session, SessionReport};
+use crate::model::Geometry;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The usable pixels of one sphere.
+#[derive(Clone, Debug)]
+pub struct SphereData {
+    /// Photo file (as in session.json) and the sphere's place in it.
+    pub image: String,
+    pub index: usize,
+    pub radius_mm: f64,
+    pub obs: Vec<Obs>,
+    /// Per observation: its pixel.
+    pub px: Vec<[u32; 2]>,
+    /// Pixels on the sphere, and how many were left out as saturated or on the edge.
+    pub pixels: usize,
+    pub saturated: usize,
+    pub edge: usize,
+    /// Noise σ per channel at the sphere's median level (radiance units).
+    pub noise: [f64; 3],
+    /// The noise model per channel: σ² = a + b·L.
+    pub noise_model: [[f64; 2]; 3],
+    /// The photo's dark floor subtracted from the radiance (`None`: not measurable).
+    pub floor: Option<[f64; 3]>,
+    /// The photo around the sphere, for figures.
+    pub crop: Crop,
+}
+
+/// A display copy of the photo around a sphere: sRGB 8-bit means of `step` × `step` pixel blocks,
+/// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across. A dark
+/// crop (99th percentile below 0.45 of full scale) is brightened by `gain` (at most 8) so that its
+/// 99th percentile shows at 0.9.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Crop {
+    pub x0: u32,
+    pub y0: u32,
+    pub step: u32,
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+    pub gain: f64,
+}
+
+impl Crop {
+    pub const MAX_CELLS: u32 = 160;
+
+    /// The crop of `bx` = [x0, y0, x1, y1] (inclusive pixel box), grown by 10% each side.
+    pub fn of(img: &crate::formats::photo::LinearRgb, bx: [u32; 4]) -> Crop {
+        let grow = ((bx[2] - bx[0]).max(bx[3] - bx[1]) / 10).max(2);
+        let x0 = bx[0].saturating_sub(grow);
+        let y0 = bx[1].saturating_sub(grow);
+        let x1 = (bx[2] + grow).min(img.width.saturating_sub(1));
+        let y1 = (bx[3] + grow).min(img.height.saturating_sub(1));
+        if x1 < x0 || y1 < y0 {
+            return Crop::default();
+        }
+        let step = (x1 - x0 + 1)
+            .max(y1 - y0 + 1)
+            .div_ceil(Crop::MAX_CELLS)
+            .max(1);
+        let width = (x1 - x0 + 1).div_ceil(step);
+        let height = (y1 - y0 + 1).div_ceil(step);
+        let mut lin = Vec::with_capacity((3 * width * height) as usize);
+        for j in 0..height {
+            for i in 0..width {
+                let mut sum = [0.0f64; 3];
+                let mut n = 0.0;
+                for y in (y0 + j * step)..(y0 + (j + 1) * step).min(y1 + 1) {
+                    for x in (x0 + i * step)..(x0 + (i + 1) * step).min(x1 + 1) {
+                        let k = 3 * (y as usize * img.width as usize + x as usize);
+                        for (s, v) in sum.iter_mut().zip(&img.data[k..k + 3]) {
+                            *s += *v as f64;
+                        }
+                        n += 1.0;
+                    }
+                }
+                lin.extend(sum.map(|s| s / n));
+            }
+        }
+        let mut sorted = lin.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let p99 = sorted
+            .get((sorted.len() as f64 * 0.99) as usize)
+            .copied()
+            .unwrap_or(1.0);
+        let gain = if p99 > 0.0 && p99 < 0.45 {
+            (0.9 / p99).min(8.0)
+        } else {
+            1.0
+        };
+        let rgb = lin
+            .iter()
+            .map(|v| (255.0 * crate::formats::photo::srgb_encode(gain * v)).round() as u8)
+            .collect();
+        Crop {
+            x0,
+            y0,
+            step,
+            width,
+            height,
+            rgb,
+            gain,
+        }
+    }
+
+    /// The block holding a pixel.
+    pub fn cell(&self, px: [u32; 2]) -> Option<(u32, u32)> {
+        if self.step == 0 || px[0] < self.x0 || px[1] < self.y0 {
+            return None;
+        }
+        let (i, j) = ((px[0] - self.x0) / self.step, (px[1] - self.y0) / self.step);
+        (i < self.width && j < self.height).then_some((i, j))
+    }
+}
+
+/// Observations of a session, with the time spent decoding and sampling.
+#[derive(Clone, Debug)]
+pub struct Observed {
+    pub spheres: Vec<SphereData>,
+    pub decode_s: f64,
+    pub samples_s: f64,
+    /// The floor subtracted from each photo (radiance units, per channel; `None`: not measurable,
+    /// nothing subtracted).
+    pub floors: Vec<Option<[f64; 3]>>,
+}
+
+/// One light per photo (`"light": "per-image"`): the rotation of each photo that takes its light
+/// onto `reference`. The model sees a sphere only through n·l, n·v and l·v, so photos turned this
+/// way share one light and the joint fit needs no other change: the material is shared, and the
+/// fitted light is the reference's, each photo's being the rotation's inverse applied to it.
+pub fn light_frames(
+    lights: &[Vector3<f64>],
+    reference: &Vector3<f64>,
+) -> Vec<nalgebra::Rotation3<f64>> {
+    lights
+        .iter()
+        .map(|l| {
+            nalgebra::Rotation3::rotation_between(l, reference)
+                .unwrap_or_else(nalgebra::Rotation3::identity)
+        })
+        .collect()
+}
+
+/// The dark-room floor per channel: the median of the pixels outside every sphere (their pixel
+/// boxes grown by a quarter), sampled on a grid of at most ~200 000 points; `None` when fewer
+/// than 1000 such pixels remain (spheres filling the frame) or when they are lit (a median above
+/// [`DARK_FLOOR_MAX`] of full scale: a backdrop or table, whose light is not in the spheres'
+/// pixels).
+pub fn background(img: &crate::formats::photo::LinearRgb, boxes: &[[u32; 4]]) -> Option<[f64; 3]> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let step = ((w * h / 200_000) as f64).sqrt().max(1.0) as usize;
+    let grown: Vec<[f64; 4]> = boxes
+        .iter()
+        .map(|b| {
+            let (bw, bh) = ((b[2] - b[0]) as f64, (b[3] - b[1]) as f64);
+            [
+                b[0] as f64 - 0.25 * bw,
+                b[1] as f64 - 0.25 * bh,
+                b[2] as f64 + 0.25 * bw,
+                b[3] as f64 + 0.25 * bh,
+            ]
+        })
+        .collect();
+    let mut ch: [Vec<f32>; 3] = Default::default();
+    for y in (0..h).step_by(step) {
+        for x in (0..w).step_by(step) {
+            let (xf, yf) = (x as f64, y as f64);
+            if grown
+                .iter()
+                .any(|b| xf >= b[0] && xf <= b[2] && yf >= b[1] && yf <= b[3])
+            {
+                continue;
+            }
+            let i = 3 * (y * w + x);
+            for (c, v) in ch.iter_mut().enumerate() {
+                v.push(img.data[i + c]);
+            }
+        }
+    }
+    if ch[0].len() < 1000 {
+        return None;
+    }
+    let med = ch.map(|mut v| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2] as f64
+    });
+    med.iter().all(|&m| m <= DARK_FLOOR_MAX).then_some(med)
+}
+
+/// The highest level (pixel value, full scale 1) taken for a dark room's floor (stray light and
+/// black level) rather than a lit backdrop.
+pub const DARK_FLOOR_MAX: f64 = 0.01;
+
+/// The noise model σ² = a + b·L per channel from adjacent-pixel differences (see the module
+/// docs); `floor` is the smallest σ allowed (a quantisation step). Without enough pairs: a
+/// constant.
+pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
+    let skip = samples::SATURATED | samples::EDGE | samples::HIGHLIGHT;
+    let mut pairs: [Vec<(f64, f64)>; 3] = Default::default();
+    for w in s.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if b.px[1] == a.px[1] && b.px[0] == a.px[0] + 1 && (a.flags | b.flags) & skip == 0 {
+            for (c, p) in pairs.iter_mut().enumerate() {
+                p.push((
+                    0.5 * (a.radiance[c] + b.radiance[c]),
+                    (a.radiance[c] - b.radiance[c]).abs(),
+                ));
+            }
+        }
+    }
+    let f2 = floor * floor;
+    // A difference of two pixels has √2 times a pixel's noise.
+    let robust_var = |d: Vec<f64>| {
+        let sd = crate::stats::robust_sigma(d) / std::f64::consts::SQRT_2;
+        (sd * sd).max(f2)
+    };
+    pairs.map(|mut p| {
+        const BINS: usize = 12;
+        if p.is_empty() {
+            return [f2, 0.0];
+        }
+        if p.len() < 20 * BINS {
+            return [robust_var(p.iter().map(|x| x.1).collect()), 0.0];
+        }
+        p.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Per bin: mean level, variance, and the variance's weight (count / var²).
+        let mut pts = vec![];
+        for chunk in p.chunks(p.len().div_ceil(BINS)) {
+            let level = chunk.iter().map(|x| x.0).sum::<f64>() / chunk.len() as f64;
+            let var = robust_var(chunk.iter().map(|x| x.1).collect());
+            pts.push((level, var, chunk.len() as f64 / (var * var)));
+        }
+        // Weighted least squares of var = a + b·level.
+        let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(x, y, w) in &pts {
+            sw += w;
+            sx += w * x;
+            sy += w * y;
+            sxx += w * x * x;
+            sxy += w * x * y;
+        }
+        let det = sw * sxx - sx * sx;
+        let (a, b) = if det > 0.0 {
+            ((sy * sxx - sx * sxy) / det, (sw * sxy - sx * sy) / det)
+        } else {
+            (sy / sw, 0.0)
+        };
+        if b < 0.0 || !b.is_finite() {
+            // No shot noise visible: a constant.
+            [(sy / sw).max(f2), 0.0]
+        } else {
+            [a.max(f2), b]
+        }
+    })
+}
+
+/// Decode the session's photos and collect the observations of every sphere of `det`, with
+/// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
+/// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
+/// vectors are turned by its rotation (see [`light_frames`]).
+pub fn observe(
+    report: &SessionReport,
+    sess: &Session,
+    det: &Detections,
+    proj: &Projection,
+    lights: &[Option<Vector3<f64>>],
+    highlight_radius: Option<f64>,
+    frame: Option<&[nalgebra::Rotation3<f64>]>,
+) -> Result<Observed> {
+    let t0 = Instant::now();
+    let images: Vec<_> = report
+        .images
+        .par_iter()
+        .zip(&sess.images)
+        .map(|(info, si)| load_linear_rgb(&info.path, si.linear))
+        .collect::<Result<_>>()?;
+    let decode_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let floors: Vec<Option<[f64; 3]>> = images
+        .par_iter()
+        .zip(&det.images)
+        .zip(&report.images)
+        .map(|((img, d), info)| {
+            let boxes: Vec<[u32; 4]> = d
+                .spheres
+                .iter()
+                .filter_map(|s| {
+                    s.outline
+                        .outline()
+                        .pixel_box(proj, 2.0, img.width, img.height)
+                })
+                .collect();
+            sess.floor
+                .map(|f| [f; 3])
+                .or_else(|| background(img, &boxes))
+                .map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
+        })
+        .collect();
+    let mut jobs = vec![];
+    for (i, (info, d)) in report.images.iter().zip(&det.images).enumerate() {
+        if d.spheres.len() != info.radii_mm.len() {
+            return Err(Error::invalid(
+                &report.session_file,
+                format!(
+                    "{}: detections list {} spheres, session.json {}",
+                    info.file,
+                    d.spheres.len(),
+                    info.radii_mm.len()
+                ),
+            ));
+        }
+        for (j, s) in d.spheres.iter().enumerate() {
+            jobs.push((i, j, s));
+        }
+    }
+    let spheres: Vec<SphereData> = jobs
+        .par_iter()
+        .map(|&(i, j, s)| {
+            let info = &report.images[i];
+            let smp = samples::sphere_samples(
+                &images[i],
+                info.exposure.unwrap_or(1.0),
+                proj,
+                &s.outline.outline(),
+                s.radius_mm,
+                lights.get(i).or(lights.first()).and_then(|l| l.as_ref()),
+                highlight_radius,
+            );
+            let turn = frame.map(|f| f[i]);
+            let floor_rgb = floors[i].unwrap_or([0.0; 3]);
+            let mut smp = smp;
+            for x in smp.iter_mut() {
+                for (v, f) in x.radiance.iter_mut().zip(&floor_rgb) {
+                    *v -= f;
+                }
+            }
+            // The smallest σ: half a level step (a noise-free render).
+            let floor =
+                0.5 / ((1u32 << images[i].bits.min(16)) as f64) / info.exposure.unwrap_or(1.0);
+            let model = noise_model(&smp, floor);
+            let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
+            // Full scale (pixel value 1) in the samples' units.
+            let full_scale = [0, 1, 2].map(|c| 1.0 / info.exposure.unwrap_or(1.0) - floor_rgb[c]);
+            let noise = {
+                let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
+                lv.sort_by(|a, b| a.total_cmp(b));
+                let med = lv.get(lv.len() / 2).copied().unwrap_or(0.0);
+                [0, 1, 2].map(|c| sigma(c, med))
+            };
+            let mut out = SphereData {
+                image: info.file.clone(),
+                index: j,
+                radius_mm: s.radius_mm,
+                obs: vec![],
+                px: vec![],
+                pixels: smp.len(),
+                saturated: 0,
+                edge: 0,
+                noise,
+                noise_model: model,
+                floor: floors[i],
+                crop: s
+                    .outline
+                    .outline()
+                    .pixel_box(proj, 2.0, images[i].width, images[i].height)
+                    .map(|b| Crop::of(&images[i], b))
+                    .unwrap_or_default(),
+            };
+            for (k, x) in smp.iter().enumerate() {
+                if x.flags & samples::SATURATED != 0 {
+                    out.saturated += 1;
+                    continue;
+                }
+                if x.flags & samples::EDGE != 0 {
+                    out.edge += 1;
+                    continue;
+                }
+                // The level of the pixel's row neighbours (not its own value: a weight that
+                // depends on the pixel's own noise biases the fit toward its low values).
+                let mut level = [0.0; 3];
+                let mut n = 0.0;
+                for nb in [k.wrapping_sub(1), k + 1] {
+                    if let Some(y) = smp.get(nb) {
+                        if y.px[1] == x.px[1] && y.px[0].abs_diff(x.px[0]) == 1 {
+                            for (l, v) in level.iter_mut().zip(&y.radiance) {
+                                *l += v;
+                            }
+                            n += 1.0;
+                        }
+                    }
+                }
+                let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
+                // Near full scale the noise is censored (values pushed over it were clipped and
+                // left out), so the rest average low: leave out pixels whose neighbours' level
+                // is within 3σ of clipping.
+                if (0..3).any(|c| level[c] + 3.0 * sigma(c, level[c]) >= full_scale[c]) {
+                    out.saturated += 1;
+                    continue;
+                }
+                let (normal, view) = match &turn {
+                    Some(r) => (r * x.normal, r * x.view),
+                    None => (x.normal, x.view),
+                };
+                out.obs.push(Obs {
+                    geometry: Geometry {
+                        normal,
+                        view,
+                        radius_mm: s.radius_mm,
+                    },
+                    radiance: x.radiance,
+                    weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
+                });
+                out.px.push(x.px);
+            }
+            out
+        })
+        .collect();
+    Ok(Observed {
+        spheres,
+        decode_s,
+        samples_s: t1.elapsed().as_secs_f64(),
+        floors,
+    })
+}

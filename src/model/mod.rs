@@ -1,0 +1,12 @@
+//! The forward model, a pixel's radiance from the material, the light and the surface under it:
+//! the CDRF's blur ([`cdrf`]), the Fresnel transmissions ([`fresnel`], [`entry`]), the specular
+//! lobe ([`specular`]) and their sum with its gradient ([`radiance`], whose items are re-exported
+//! here).
+
+pub mod cdrf;
+pub mod entry;
+pub mod fresnel;
+mod radiance;
+pub mod specular;
+
+pub use radiance::*;

@@ -1,0 +1,355 @@
+//! The radiance model workbench fits, per colour channel c:
+//!
+//!     L_c = a_c(r) · T(φ; η) · f(θ; σ_c(r))  +  ks · D · G · F(l·h; η) / (4 n·v)
+//!     σ_c(r) = (σ0_c / r) · (r_ref / r)^q,     a_c(r) = a_c · exp(b · (r_ref / r − 1))
+//!
+//! with θ = angle(n, l), φ = angle(n, v), f the CDRF ([`crate::model::cdrf`]) — the blur along θ of
+//! the clamped cosine, or with `entry_fresnel` of the irradiance transmitted into the medium,
+//! max(cos θ, 0)·T(cos θ; η) ([`crate::model::entry`]) —,
+//! T = 1 − F the exact Fresnel transmission ([`crate::model::fresnel`]), and the GGX lobe
+//! ([`crate::model::specular`]).
+//! The light's irradiance is folded into a_c and ks. The light direction is two angles
+//! ([`LightAngles`]). Parameters are physical here; the solver maps them to unbounded ones.
+//!
+//! q (`sigma_exponent`) and b (`albedo_curvature`) are extensions of the plain CDRF (both 0):
+//! q > 0 makes σ·r grow as r shrinks, b > 0 makes small spheres brighter. The reference radius
+//! r_ref ([`Model::reference_radius_mm`]) is where σ0 and the albedo keep their plain meaning.
+//!
+//! The kernel's shape (`kernel_weight` w, `kernel_ratio` s) is the third extension: the blur is a
+//! sum of two Gaussians, f → (1 − w)·f(θ; σ_c) + w·f(θ; s·σ_c) ([`cdrf::mixture`]), one shape
+//! shared by the channels, each channel's width scaled by its σ0 (w = 0: the plain Gaussian).
+
+use crate::model::cdrf::{self, Convolution};
+use crate::model::entry;
+use crate::model::fresnel;
+use crate::model::specular;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Number of model parameters: σ0 ×3, albedo ×3, η, ks, α, light azimuth, light elevation,
+/// the two extensions q and b, and the kernel's weight and width ratio.
+pub const N_PARAMS: usize = 15;
+/// Parameter indices into a gradient row.
+pub mod idx {
+    pub const SIGMA0: usize = 0; // .. 3
+    pub const ALBEDO: usize = 3; // .. 6
+    pub const ETA: usize = 6;
+    pub const KS: usize = 7;
+    pub const ALPHA: usize = 8;
+    pub const AZIMUTH: usize = 9;
+    pub const ELEVATION: usize = 10;
+    pub const SIGMA_EXPONENT: usize = 11;
+    pub const ALBEDO_CURVATURE: usize = 12;
+    pub const KERNEL_WEIGHT: usize = 13;
+    pub const KERNEL_RATIO: usize = 14;
+}
+/// Human-readable parameter names, in index order.
+pub const PARAM_NAMES: [&str; N_PARAMS] = [
+    "sigma0_r",
+    "sigma0_g",
+    "sigma0_b",
+    "albedo_r",
+    "albedo_g",
+    "albedo_b",
+    "eta",
+    "ks",
+    "alpha",
+    "light_azimuth",
+    "light_elevation",
+    "sigma_exponent",
+    "albedo_curvature",
+    "kernel_weight",
+    "kernel_ratio",
+];
+
+/// Material parameters, named as in `truth.json` and `fit.json`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    /// Scattering length per channel (mm): σ = σ0 / r radians on a sphere of radius r.
+    pub sigma0_mm: [f64; 3],
+    /// Diffuse albedo per channel, light irradiance folded in.
+    pub albedo: [f64; 3],
+    /// Index of refraction.
+    pub eta: f64,
+    pub specular: SpecularParams,
+    /// Extension q: σ = (σ0 / r) · (r_ref / r)^q (0: the plain CDRF).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub sigma_exponent: f64,
+    /// Extension b: albedo · exp(b · (r_ref / r − 1)) (0: the same albedo at every radius).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub albedo_curvature: f64,
+    /// The kernel's tail weight w ∈ [0, 1) (0: one Gaussian).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub kernel_weight: f64,
+    /// The tail's width over the core's, s > 1 (unused when w = 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub kernel_ratio: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpecularParams {
+    /// Lobe scale (light irradiance folded in; 1 for a physical dielectric lobe under unit light).
+    pub ks: f64,
+    /// GGX roughness α.
+    pub alpha: f64,
+}
+
+/// Light direction as azimuth and elevation (radians), camera frame:
+/// l = (cos e · sin a, −sin e, −cos e · cos a). (0, 0) is a light at the camera; positive azimuth
+/// is toward +x (right), positive elevation toward −y (up). Both poles (light straight above or
+/// below) are the only singular directions; the camera axis and the back-light are regular.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightAngles {
+    pub azimuth: f64,
+    pub elevation: f64,
+}
+
+impl LightAngles {
+    pub fn direction(&self) -> Vector3<f64> {
+        let (sa, ca) = self.azimuth.sin_cos();
+        let (se, ce) = self.elevation.sin_cos();
+        Vector3::new(ce * sa, -se, -ce * ca)
+    }
+
+    /// ∂l/∂azimuth and ∂l/∂elevation.
+    pub fn jacobian(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let (sa, ca) = self.azimuth.sin_cos();
+        let (se, ce) = self.elevation.sin_cos();
+        (
+            Vector3::new(ce * ca, 0.0, ce * sa),
+            Vector3::new(-se * sa, -ce, se * ca),
+        )
+    }
+
+    /// Angles of a direction (normalised first).
+    pub fn from_direction(l: &Vector3<f64>) -> LightAngles {
+        let l = l.normalize();
+        LightAngles {
+            elevation: (-l.y).clamp(-1.0, 1.0).asin(),
+            azimuth: l.x.atan2(-l.z),
+        }
+    }
+}
+
+/// Everything the model needs besides geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    pub material: Material,
+    pub light: LightAngles,
+}
+
+impl Params {
+    /// A diffuse-only material (ks = 0, α = 0.1 for when a lobe is switched on, no extensions).
+    pub fn diffuse(sigma0_mm: [f64; 3], albedo: [f64; 3], eta: f64, light: LightAngles) -> Params {
+        Params {
+            material: Material {
+                sigma0_mm,
+                albedo,
+                eta,
+                specular: SpecularParams {
+                    ks: 0.0,
+                    alpha: 0.1,
+                },
+                sigma_exponent: 0.0,
+                albedo_curvature: 0.0,
+                kernel_weight: 0.0,
+                kernel_ratio: 0.0,
+            },
+            light,
+        }
+    }
+
+    pub fn to_vec(&self) -> [f64; N_PARAMS] {
+        let m = &self.material;
+        [
+            m.sigma0_mm[0],
+            m.sigma0_mm[1],
+            m.sigma0_mm[2],
+            m.albedo[0],
+            m.albedo[1],
+            m.albedo[2],
+            m.eta,
+            m.specular.ks,
+            m.specular.alpha,
+            self.light.azimuth,
+            self.light.elevation,
+            m.sigma_exponent,
+            m.albedo_curvature,
+            m.kernel_weight,
+            m.kernel_ratio,
+        ]
+    }
+
+    pub fn from_vec(p: &[f64; N_PARAMS]) -> Params {
+        Params {
+            material: Material {
+                sigma0_mm: [p[0], p[1], p[2]],
+                albedo: [p[3], p[4], p[5]],
+                eta: p[6],
+                specular: SpecularParams {
+                    ks: p[7],
+                    alpha: p[8],
+                },
+                sigma_exponent: p[11],
+                albedo_curvature: p[12],
+                kernel_weight: p[13],
+                kernel_ratio: p[14],
+            },
+            light: LightAngles {
+                azimuth: p[9],
+                elevation: p[10],
+            },
+        }
+    }
+}
+
+/// Per-pixel geometry: unit normal, unit view vector, local radius of curvature (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    pub normal: Vector3<f64>,
+    pub view: Vector3<f64>,
+    pub radius_mm: f64,
+}
+
+/// The radiance model with its structural choices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Model {
+    pub convolution: Convolution,
+    /// r_ref of the extensions (mm).
+    pub reference_radius_mm: f64,
+    /// Multiply the diffuse term by the exit transmission T(φ) (the paper's baseline divides the
+    /// data by it instead and turns this off).
+    pub exit_fresnel: bool,
+    /// Blur the transmitted irradiance max(cos θ, 0)·T(cos θ; η) instead of the bare clamped
+    /// cosine ([`crate::model::entry`]). Off by default (`solve --entry-transmission` turns it on; why
+    /// not yet by default: docs/uncertainty.md).
+    pub entry_fresnel: bool,
+}
+
+/// The reference radius of the extensions: the middle of the usual 15–35 mm sphere sets.
+pub const REFERENCE_RADIUS_MM: f64 = 25.0;
+
+impl Default for Model {
+    fn default() -> Self {
+        Model {
+            convolution: Convolution::default(),
+            reference_radius_mm: REFERENCE_RADIUS_MM,
+            exit_fresnel: true,
+            entry_fresnel: false,
+        }
+    }
+}
+
+/// Model output for one pixel: RGB radiance and, optionally, ∂L_c/∂p for every parameter.
+pub type Rgb = [f64; 3];
+pub type Gradient = [[f64; N_PARAMS]; 3];
+
+impl Model {
+    /// The diffuse term's blur σ_c (radians) and albedo a_c at curvature κ = 1/r (1/mm), as in the
+    /// module formula; κ = 0 is a flat surface (the limit r → ∞: σ = 0 unless q ≤ −1).
+    pub fn diffuse_terms(&self, m: &Material, kappa: f64) -> ([f64; 3], [f64; 3]) {
+        // κ = 0 evaluated as the limit κ → 0⁺ (a tiny κ gives σ = 0 for q > −1, σ0 / r_ref for
+        // q = −1 and ∞ below, without 0 · ∞).
+        let kappa = kappa.max(1e-300);
+        let rr = self.reference_radius_mm * kappa;
+        let scale = rr.powf(m.sigma_exponent);
+        let albedo_scale = (m.albedo_curvature * (rr - 1.0)).exp();
+        let sigma = std::array::from_fn(|c| (m.sigma0_mm[c] * kappa) * scale);
+        (sigma, std::array::from_fn(|c| m.albedo[c] * albedo_scale))
+    }
+
+    /// The diffuse term without exit transmission, a_c · f(θ; σ_c), at cos θ = n·l and κ = 1/r:
+    /// what the look-up table of [`crate::render::lut`] holds.
+    pub fn diffuse(&self, m: &Material, cos_theta: f64, kappa: f64) -> Rgb {
+        let theta = cos_theta.clamp(-1.0, 1.0).acos();
+        let (sigma, albedo) = self.diffuse_terms(m, kappa);
+        std::array::from_fn(|c| albedo[c] * self.profile(m, theta, sigma[c]).f.value)
+    }
+
+    /// The blur profile at θ for a core width σ: one Gaussian or two, of the clamped cosine or
+    /// of the transmitted irradiance (`entry_fresnel`, its `d_param` then ∂/∂η).
+    pub fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
+        let (w, s, conv) = (m.kernel_weight, m.kernel_ratio, self.convolution);
+        if self.entry_fresnel {
+            entry::with_series(m.eta, |series| {
+                cdrf::mixture(theta, sigma, w, s, Some(series), conv)
+            })
+        } else {
+            cdrf::mixture(theta, sigma, w, s, None, conv)
+        }
+    }
+
+    /// RGB radiance at one surface point.
+    pub fn radiance(&self, p: &Params, g: &Geometry) -> Rgb {
+        self.eval(p, g, false).0
+    }
+
+    /// RGB radiance and its gradient with respect to all [`N_PARAMS`] parameters.
+    pub fn radiance_with_gradient(&self, p: &Params, g: &Geometry) -> (Rgb, Gradient) {
+        self.eval(p, g, true)
+    }
+
+    fn eval(&self, p: &Params, g: &Geometry, want_grad: bool) -> (Rgb, Gradient) {
+        let mut out = [0.0; 3];
+        let mut grad = [[0.0; N_PARAMS]; 3];
+        let nv = g.normal.dot(&g.view);
+        if nv <= 0.0 {
+            return (out, grad);
+        }
+        let m = &p.material;
+        let l = p.light.direction();
+        let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
+        let lv = l.dot(&g.view).clamp(-1.0, 1.0);
+        let theta = nl.acos();
+        let fr = if self.exit_fresnel {
+            fresnel::eval(nv, m.eta)
+        } else {
+            fresnel::FresnelEval {
+                reflectance: 0.0,
+                d_cos: 0.0,
+                d_eta: 0.0,
+            }
+        };
+        let t_exit = fr.transmission();
+        let rr = self.reference_radius_mm / g.radius_mm;
+        let ln_rr = rr.ln();
+        let sigma_scale = rr.powf(m.sigma_exponent);
+        let albedo_scale = (m.albedo_curvature * (rr - 1.0)).exp();
+        let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
+        let (dl_da, dl_de) = if want_grad {
+            p.light.jacobian()
+        } else {
+            Default::default()
+        };
+        for c in 0..3 {
+            let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
+            let mix = self.profile(m, theta, sigma);
+            let f = mix.f;
+            let a = m.albedo[c] * albedo_scale;
+            out[c] = a * t_exit * f.value + spec.value;
+            if !want_grad {
+                continue;
+            }
+            let row = &mut grad[c];
+            row[idx::SIGMA0 + c] = a * t_exit * f.d_sigma * sigma / m.sigma0_mm[c];
+            row[idx::ALBEDO + c] = albedo_scale * t_exit * f.value;
+            row[idx::ETA] = a * (t_exit * mix.d_param - f.value * fr.d_eta) + spec.d_eta;
+            row[idx::KS] = spec.d_ks;
+            row[idx::ALPHA] = spec.d_alpha;
+            row[idx::SIGMA_EXPONENT] = a * t_exit * f.d_sigma * sigma * ln_rr;
+            row[idx::ALBEDO_CURVATURE] = a * t_exit * f.value * (rr - 1.0);
+            row[idx::KERNEL_WEIGHT] = a * t_exit * mix.d_weight;
+            row[idx::KERNEL_RATIO] = a * t_exit * mix.d_ratio;
+            // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
+            let d_nl = a * t_exit * f.d_cos(theta) + spec.d_nl;
+            let dl = g.normal * d_nl + g.view * spec.d_lv;
+            row[idx::AZIMUTH] = dl.dot(&dl_da);
+            row[idx::ELEVATION] = dl.dot(&dl_de);
+        }
+        (out, grad)
+    }
+}
