@@ -16,10 +16,10 @@
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use workbench::figures::plot::{Layer, Plot, PALETTE};
 use workbench::fit::joint::{self, Reduction};
 use workbench::fit::solve::{self, ExtensionChoice, FitFile, Method, Options};
 use workbench::model::N_PARAMS;
+use workbench::plot::{Layer, Plot, PALETTE};
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
 fn detect(dir: &Path) -> f64 {
@@ -154,7 +154,7 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
     );
     plot.layers.push(Layer::HLine {
         y: (0.3f64).log10(),
-        color: workbench::figures::plot::GREY,
+        color: workbench::plot::GREY,
         dashed: true,
         label: Some("0.3 std (auto's limit)".into()),
     });

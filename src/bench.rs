@@ -8,9 +8,9 @@
 
 use crate::detect;
 use crate::error::{Error, Result};
-use crate::figures::plot::{Layer, Plot, PALETTE};
 use crate::fit::joint::Reduction;
 use crate::fit::solve::{self, Options};
+use crate::plot::{Layer, Plot, PALETTE};
 use crate::synth::session::{self, Format, SessionConfig, SessionTruth};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};

@@ -15,6 +15,7 @@ pub mod figures;
 pub mod fit;
 pub mod formats;
 pub mod model;
+pub mod plot;
 pub mod progress;
 pub mod render;
 pub mod stats;

@@ -11,18 +11,19 @@
 
 pub mod highlight;
 pub mod overlay;
+pub mod samples;
 pub mod silhouette;
 
 use crate::camera::outline::{Outline, Projection};
 use crate::camera::sphere::EllipseJson;
 use crate::error::{Error, Result};
-use crate::fit::samples::{self, Counts};
 use crate::formats::photo::{load_linear_rgb, LinearRgb};
 use crate::formats::session::{self, LightMode, Session};
 use crate::model::LightAngles;
 use highlight::{Highlight, Method};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
+use samples::Counts;
 use serde::{Deserialize, Serialize};
 use silhouette::{blobs, Plane};
 use std::path::{Path, PathBuf};

@@ -4,9 +4,9 @@
 use crate::camera::outline::Projection;
 use crate::detect::Found;
 use crate::error::{Error, Result};
-use crate::figures::plot::{register_font, BLUE, GREEN, ORANGE, VERMILLION};
 use crate::formats::photo::{srgb_encode, LinearRgb};
 use crate::model::LightAngles;
+use crate::plot::{register_font, BLUE, GREEN, ORANGE, VERMILLION};
 use nalgebra::{Vector2, Vector3};
 use plotters::prelude::*;
 use std::path::Path;

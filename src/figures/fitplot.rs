@@ -1,4 +1,4 @@
-//! Figures of a fit, drawn with [`crate::figures::plot`] from `fit.json` and the session's pixels (so that
+//! Figures of a fit, drawn with [`crate::plot`] from `fit.json` and the session's pixels (so that
 //! `workbench plot` redraws them without solving again):
 //!
 //! - `radiance-theta`: radiance against θ per channel, a thinned scatter of the pixels per radius,
@@ -12,13 +12,13 @@
 //! - `index.html` ([`crate::figures::report`]): all of them with the fit's summary.
 
 use crate::error::{Error, Result};
-use crate::figures::plot::{
-    colorbar, diverging, Figure, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREEN, GREY, PALETTE,
-    VERMILLION,
-};
 use crate::fit::observe::SphereData;
 use crate::fit::solve::FitFile;
 use crate::model::{Model, Params};
+use crate::plot::{
+    colorbar, diverging, Figure, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREEN, GREY, PALETTE,
+    VERMILLION,
+};
 use crate::stats::percentile;
 use plotters::style::RGBColor;
 use rayon::prelude::*;

@@ -1,6 +1,4 @@
-//! Figures: the plotting module ([`plot`]), a fit's figures ([`fitplot`]) and its page
-//! ([`report`]).
+//! A fit's figures ([`fitplot`]) and its page ([`report`]), drawn with [`crate::plot`].
 
 pub mod fitplot;
-pub mod plot;
 pub mod report;

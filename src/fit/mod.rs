@@ -1,4 +1,4 @@
-//! From photos to the material: observations from the detected spheres ([`observe`], [`samples`]),
+//! From photos to the material: observations from the detected spheres ([`observe`]),
 //! pooled ([`reduce`]), fitted by least squares ([`solver`]) in the joint fit's stages ([`joint`]),
 //! beside the paper's procedure ([`paper`]), driven by the `solve` command ([`solve`]).
 
@@ -6,6 +6,5 @@ pub mod joint;
 pub mod observe;
 pub mod paper;
 pub mod reduce;
-pub mod samples;
 pub mod solve;
 pub mod solver;

@@ -1,5 +1,5 @@
 //! From a session and its detections to the solver's observations: decode every photo, take the
-//! pixels of every detected sphere ([`crate::fit::samples`]), leave out the saturated ones and those
+//! pixels of every detected sphere ([`crate::detect::samples`]), leave out the saturated ones and those
 //! that straddle the silhouette, and weight each pixel's channel by 1/σ of its noise.
 //!
 //! The noise is measured, not assumed: per sphere and channel, a shot-plus-read model
@@ -19,9 +19,9 @@
 //! ([`crate::fit::solver::fit_with_floor`]).
 
 use crate::camera::outline::Projection;
+use crate::detect::samples::{self, Sample};
 use crate::detect::Detections;
 use crate::error::{Error, Result};
-use crate::fit::samples::{self, Sample};
 use crate::fit::solver::Obs;
 use crate::formats::photo::load_linear_rgb;
 use crate::formats::session::{Session, SessionReport};

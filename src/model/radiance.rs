@@ -263,7 +263,7 @@ impl Model {
     }
 
     /// The diffuse term without exit transmission, a_c · f(θ; σ_c), at cos θ = n·l and κ = 1/r:
-    /// what the look-up table of [`crate::render::lut`] holds.
+    /// what the renderer's look-up table (`render::lut`) holds.
     pub fn diffuse(&self, m: &Material, cos_theta: f64, kappa: f64) -> Rgb {
         let theta = cos_theta.clamp(-1.0, 1.0).acos();
         let (sigma, albedo) = self.diffuse_terms(m, kappa);

@@ -114,7 +114,7 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
     let proj = workbench::camera::outline::Projection::Perspective(cam);
     // θ and the highlight flags come from the detected light.
     let l = Vector3::from(d.light_direction.unwrap());
-    let smp = workbench::fit::samples::sphere_samples(
+    let smp = workbench::detect::samples::sphere_samples(
         &img,
         t.images[0].exposure,
         &proj,
@@ -123,7 +123,7 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
         Some(&l),
         Some(s.highlight.as_ref().unwrap().radius_deg.to_radians()),
     );
-    assert_eq!(workbench::fit::samples::counts(&smp), s.samples);
+    assert_eq!(workbench::detect::samples::counts(&smp), s.samples);
     let sphere = workbench::camera::sphere::Sphere::new(
         Vector3::from(t.images[0].spheres[0].center_mm),
         20.0,
@@ -131,7 +131,7 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
     let mut worst_theta: f64 = 0.0;
     for x in smp
         .iter()
-        .filter(|x| x.flags & workbench::fit::samples::EDGE == 0)
+        .filter(|x| x.flags & workbench::detect::samples::EDGE == 0)
     {
         let i = (x.px[1] * img.width + x.px[0]) as usize;
         for c in 0..3 {

@@ -1,9 +1,9 @@
-//! Calibration figures, drawn with the shared [`crate::figures::plot`] module: per-view reprojection error,
+//! Calibration figures, drawn with the shared [`crate::plot`] module: per-view reprojection error,
 //! the corner residual scatter, and the corner coverage of the frame.
 
 use super::{coverage, view_residuals, Calibration};
 use crate::error::Result;
-use crate::figures::plot::{shade, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREY, VERMILLION};
+use crate::plot::{shade, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREY, VERMILLION};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
