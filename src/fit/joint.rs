@@ -590,76 +590,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     }
     // Reduction level.
     lap("specular start", &mut phases);
-    let mut levels = vec![];
-    let level = |f: u32, b: u32, n: usize, shift: &crate::fit::reduce::Shift| Level {
-        width_deg: f as f64 * 0.25,
-        highlight_block_px: b,
-        observations: n,
-        predicted_shift_std: shift.max_std,
-        within_tolerance: shift.within_tolerance,
-        limiting: shift.limiting.map(|k| PARAM_NAMES[k].to_string()),
-    };
-    // Angular cells first (the highlight pixel by pixel), then the highlight's pixel blocks; the
-    // cells chosen are kept for the fit.
-    let (chosen_factor, block, chosen_cells) = match setup.reduction {
-        Reduction::None => (None, 1, None),
-        Reduction::Factor(f) => {
-            let mut cells = pooled.merged(f);
-            cells.extend(pooled.highlight_cells(1));
-            (Some(f), 1, Some(cells))
-        }
-        Reduction::Auto => {
-            let single = pooled.highlight_cells(1);
-            let mut pyramid = pooled.pyramid();
-            let mut pick = None;
-            for (k, (f, cells)) in pyramid.iter().enumerate().rev() {
-                let shift = pooled.shift(cells, &single, &model, &p, free);
-                levels.push(level(*f, 1, cells.len() + single.len(), &shift));
-                if shift.within_tolerance {
-                    pick = Some(k);
-                    break;
-                }
-            }
-            match pick {
-                None => (None, 1, None),
-                Some(k) => {
-                    let (f, mut angular) = pyramid.swap_remove(k);
-                    let mut highlight = (1, single);
-                    for b in HIGHLIGHT_BLOCKS {
-                        if pooled.kept.len() < 4 * (b * b) as usize {
-                            continue;
-                        }
-                        let hl = pooled.highlight_cells(b);
-                        let shift = pooled.shift(&angular, &hl, &model, &p, free);
-                        levels.push(level(f, b, angular.len() + hl.len(), &shift));
-                        if shift.within_tolerance {
-                            highlight = (b, hl);
-                            break;
-                        }
-                    }
-                    angular.extend(highlight.1);
-                    (Some(f), highlight.0, Some(angular))
-                }
-            }
-        }
-    };
-    let final_obs = match &chosen_cells {
-        Some(cells) => pooled.observations(cells),
-        // Every pixel.
-        None => spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect(),
-    };
-    let tried = levels.iter().find(|l| {
-        Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25) && l.highlight_block_px == block
-    });
-    let chosen = Level {
-        width_deg: chosen_factor.map_or(0.0, |f| f as f64 * 0.25),
-        highlight_block_px: block,
-        observations: final_obs.len(),
-        predicted_shift_std: tried.map_or(0.0, |l| l.predicted_shift_std),
-        within_tolerance: tried.is_none_or(|l| l.within_tolerance),
-        limiting: tried.and_then(|l| l.limiting.clone()),
-    };
-    if chosen_factor.is_none() && setup.reduction == Reduction::Auto {
+    let (final_obs, chosen, levels) =
+        choose_reduction(setup.reduction, &pooled, spheres, &model, &p, free);
+    if chosen.width_deg == 0.0 && setup.reduction == Reduction::Auto {
         notes.push(format!(
             "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std or its tolerance: every pixel used"
         ));
@@ -874,46 +807,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             singular.join(", ")
         ));
     }
-    // Goodness of fit against the measured noise (weights are 1/σ per pixel and channel).
-    let dof = fit
-        .residuals
-        .saturating_sub(fit.free.iter().filter(|f| **f).count())
-        .saturating_sub(if fit.floor.is_some() { 3 } else { 0 })
-        .max(1);
-    let chi2 = 2.0 * fit.cost / dof as f64;
-    if chi2 > CHI2_WARN {
-        notes.push(format!(
-            "the residuals are {:.1}× the measured noise (χ²/dof = {chi2:.1}): the model does not describe these photos fully — check the detections (light, outlines); a wrong light or outline biases σ0",
-            chi2.sqrt()
-        ));
-    }
-    // A light beside the camera: θ ≈ φ everywhere, the blur and the exit transmission trade off.
-    let view: Vector3<f64> = spheres
-        .iter()
-        .filter_map(|s| s.obs.first())
-        .map(|o| o.geometry.view)
-        .sum();
-    if view.norm() > 0.0 {
-        let a = fit.params.light.direction().angle(&view).to_degrees();
-        if a < NEAR_VIEW_DEG {
-            notes.push(format!(
-                "the light is {a:.1}° from the camera's direction: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
-            ));
-        }
-    }
-    let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
-    if status[idx::ETA].starts_with("prior") && tension > 3.0 {
-        notes.push(format!(
-            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim and the terminator disagrees with the data (its std is scaled for the disagreement); measure η with --irradiance",
-            fit.params.material.eta
-        ));
-    }
-    if status[idx::ETA].starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
-        notes.push(format!(
-            "η = {:.4} (formal ± {:.4}): the data, through the Fresnel transmissions, determine η better than its prior (± {eta_std}); that rests on the model's fall-off at the terminator and the rim",
-            fit.params.material.eta, fit.std[idx::ETA]
-        ));
-    }
+    let (chi2, quality) = fit_notes(&fit, spheres, setup.eta_prior, &status[idx::ETA]);
+    notes.extend(quality);
     // How far the shading pulled the light from the detector's, in the detector's errors.
     let light_pull = match (detector, setup.light_std) {
         (Some(d), Some(s)) if free[idx::AZIMUTH] && s > 0.0 => {
@@ -994,6 +889,143 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         eta_systematic,
         chi2_dof: chi2,
     }
+}
+
+/// What the fit's residuals and geometry say about it: the residuals against the measured noise
+/// (returned as χ²/dof), a light beside the camera, and η against its prior. Returns χ²/dof and
+/// the notes.
+fn fit_notes(
+    fit: &Fit,
+    spheres: &[&SphereData],
+    (eta_mean, eta_std): (f64, f64),
+    eta_status: &str,
+) -> (f64, Vec<String>) {
+    let mut notes = vec![];
+    // Goodness of fit against the measured noise (weights are 1/σ per pixel and channel).
+    let dof = fit
+        .residuals
+        .saturating_sub(fit.free.iter().filter(|f| **f).count())
+        .saturating_sub(if fit.floor.is_some() { 3 } else { 0 })
+        .max(1);
+    let chi2 = 2.0 * fit.cost / dof as f64;
+    if chi2 > CHI2_WARN {
+        notes.push(format!(
+            "the residuals are {:.1}× the measured noise (χ²/dof = {chi2:.1}): the model does not describe these photos fully — check the detections (light, outlines); a wrong light or outline biases σ0",
+            chi2.sqrt()
+        ));
+    }
+    // A light beside the camera: θ ≈ φ everywhere, the blur and the exit transmission trade off.
+    let view: Vector3<f64> = spheres
+        .iter()
+        .filter_map(|s| s.obs.first())
+        .map(|o| o.geometry.view)
+        .sum();
+    if view.norm() > 0.0 {
+        let a = fit.params.light.direction().angle(&view).to_degrees();
+        if a < NEAR_VIEW_DEG {
+            notes.push(format!(
+                "the light is {a:.1}° from the camera's direction: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
+            ));
+        }
+    }
+    let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
+    if eta_status.starts_with("prior") && tension > 3.0 {
+        notes.push(format!(
+            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim and the terminator disagrees with the data (its std is scaled for the disagreement); measure η with --irradiance",
+            fit.params.material.eta
+        ));
+    }
+    if eta_status.starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
+        notes.push(format!(
+            "η = {:.4} (formal ± {:.4}): the data, through the Fresnel transmissions, determine η better than its prior (± {eta_std}); that rests on the model's fall-off at the terminator and the rim",
+            fit.params.material.eta, fit.std[idx::ETA]
+        ));
+    }
+    (chi2, notes)
+}
+
+/// The reduction level (docs/solve.md, step 4): angular cells first (the highlight pixel by
+/// pixel), then the highlight's pixel blocks, each the coarsest whose predicted shift is within
+/// tolerance under `Reduction::Auto`. Returns the observations the joint stage fits, the level
+/// chosen (width 0: every pixel) and the levels tried.
+fn choose_reduction(
+    reduction: Reduction,
+    pooled: &Pooled,
+    spheres: &[&SphereData],
+    model: &Model,
+    p: &Params,
+    free: [bool; N_PARAMS],
+) -> (Vec<Obs>, Level, Vec<Level>) {
+    let mut levels = vec![];
+    let level = |f: u32, b: u32, n: usize, shift: &crate::fit::reduce::Shift| Level {
+        width_deg: f as f64 * 0.25,
+        highlight_block_px: b,
+        observations: n,
+        predicted_shift_std: shift.max_std,
+        within_tolerance: shift.within_tolerance,
+        limiting: shift.limiting.map(|k| PARAM_NAMES[k].to_string()),
+    };
+    // Angular cells first (the highlight pixel by pixel), then the highlight's pixel blocks; the
+    // cells chosen are kept for the fit.
+    let (chosen_factor, block, chosen_cells) = match reduction {
+        Reduction::None => (None, 1, None),
+        Reduction::Factor(f) => {
+            let mut cells = pooled.merged(f);
+            cells.extend(pooled.highlight_cells(1));
+            (Some(f), 1, Some(cells))
+        }
+        Reduction::Auto => {
+            let single = pooled.highlight_cells(1);
+            let mut pyramid = pooled.pyramid();
+            let mut pick = None;
+            for (k, (f, cells)) in pyramid.iter().enumerate().rev() {
+                let shift = pooled.shift(cells, &single, model, p, free);
+                levels.push(level(*f, 1, cells.len() + single.len(), &shift));
+                if shift.within_tolerance {
+                    pick = Some(k);
+                    break;
+                }
+            }
+            match pick {
+                None => (None, 1, None),
+                Some(k) => {
+                    let (f, mut angular) = pyramid.swap_remove(k);
+                    let mut highlight = (1, single);
+                    for b in HIGHLIGHT_BLOCKS {
+                        if pooled.kept.len() < 4 * (b * b) as usize {
+                            continue;
+                        }
+                        let hl = pooled.highlight_cells(b);
+                        let shift = pooled.shift(&angular, &hl, model, p, free);
+                        levels.push(level(f, b, angular.len() + hl.len(), &shift));
+                        if shift.within_tolerance {
+                            highlight = (b, hl);
+                            break;
+                        }
+                    }
+                    angular.extend(highlight.1);
+                    (Some(f), highlight.0, Some(angular))
+                }
+            }
+        }
+    };
+    let final_obs = match &chosen_cells {
+        Some(cells) => pooled.observations(cells),
+        // Every pixel.
+        None => spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect(),
+    };
+    let tried = levels.iter().find(|l| {
+        Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25) && l.highlight_block_px == block
+    });
+    let chosen = Level {
+        width_deg: chosen_factor.map_or(0.0, |f| f as f64 * 0.25),
+        highlight_block_px: block,
+        observations: final_obs.len(),
+        predicted_shift_std: tried.map_or(0.0, |l| l.predicted_shift_std),
+        within_tolerance: tried.is_none_or(|l| l.within_tolerance),
+        limiting: tried.and_then(|l| l.limiting.clone()),
+    };
+    (final_obs, chosen, levels)
 }
 
 /// The light's move from the detector's estimate in the joint fit.
