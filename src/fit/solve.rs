@@ -234,6 +234,15 @@ pub struct Jackknife {
     pub json: JackknifeJson,
 }
 
+/// Radiance units → pixel values (full scale 1) for a floor shared by photos of one exposure.
+fn pixel_scale(report: &SessionReport) -> f64 {
+    report
+        .images
+        .first()
+        .and_then(|i| i.exposure)
+        .unwrap_or(1.0)
+}
+
 /// A sphere's data less a dark floor (radiance units), which becomes its `floor`.
 fn less_floor(s: &SphereData, floor: [f64; 3]) -> SphereData {
     SphereData {
@@ -1215,12 +1224,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
                 None
             };
             if let Some(fl) = jf.fit.floor {
-                let e = l
-                    .report
-                    .images
-                    .first()
-                    .and_then(|i| i.exposure)
-                    .unwrap_or(1.0);
+                let e = pixel_scale(&l.report);
                 let show = |v: [f64; 3]| v.map(|x| format!("{:.5}", x * e)).join(", ");
                 notes.push(format!(
                     "no dark floor measured (the photos around the spheres are lit): fitted with the material, {} ± {} of full scale (r, g, b), and subtracted before the predictions and figures",
@@ -1553,12 +1557,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         light_fit: outcome.light_fit.clone(),
         light_pull: outcome.light_pull,
         dark_floor: outcome.floor.map(|f| {
-            let e = l
-                .report
-                .images
-                .first()
-                .and_then(|i| i.exposure)
-                .unwrap_or(1.0);
+            let e = pixel_scale(&l.report);
             DarkFloorJson {
                 value: f.value.map(|v| v * e),
                 std: f.std.map(|v| v * e),

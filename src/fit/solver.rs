@@ -274,8 +274,7 @@ impl Problem<'_> {
         let mut std = [0.0; N_PARAMS];
         let mut correlation = DMatrix::zeros(n, n);
         let cov = ne.finite.then(|| info.try_inverse()).flatten();
-        let floor = self.floor.then(|| {
-            let sums = self.floor_sums();
+        let floor = ne.floor.as_ref().map(|sums| {
             let (value, _) = sums.solve();
             let std = [0, 1, 2].map(|c| {
                 if sums.ww[c] <= 0.0 {
@@ -306,34 +305,6 @@ impl Problem<'_> {
         }
         (std, correlation, cost, floor)
     }
-
-    /// Per channel Σw², Σw·r and Σw·J over the observations, r and J without the floor.
-    fn floor_sums(&self) -> FloorSums {
-        let (p, dpdu) = from_unbounded(&self.u);
-        let params = Params::from_vec(&p);
-        let free = self.free_idx();
-        let n = free.len();
-        self.obs
-            .par_chunks(2048)
-            .map(|chunk| {
-                let mut fs = FloorSums::zero(n);
-                for o in chunk {
-                    let (l, grad) = self.model.radiance_with_gradient(&params, &o.geometry);
-                    for c in 0..3 {
-                        let w = o.weight[c];
-                        fs.ww[c] += w * w;
-                        fs.wr[c] += w * w * (l[c] - o.radiance[c]);
-                        for (i, &k) in free.iter().enumerate() {
-                            fs.wg[c][i] += w * w * grad[c][k] * dpdu[k];
-                        }
-                    }
-                }
-                fs
-            })
-            .collect::<Vec<_>>()
-            .into_iter()
-            .fold(FloorSums::zero(n), |a, b| a.add(&b))
-    }
 }
 
 /// The normal equations of the weighted problem: JᵀJ, Jᵀr and rᵀr (observations and priors).
@@ -345,6 +316,8 @@ pub struct Normal {
     pub rtr_obs: f64,
     pub rtr_prior: f64,
     pub finite: bool,
+    /// With the floor free: the per-channel sums it was profiled out with (r and J without it).
+    floor: Option<FloorSums>,
 }
 
 impl Problem<'_> {
@@ -437,6 +410,7 @@ impl Problem<'_> {
             rtr_obs: rtr,
             rtr_prior,
             finite,
+            floor: floor.then_some(sums),
         }
     }
 }
