@@ -8,9 +8,9 @@
 
 use std::path::Path;
 use std::time::Instant;
-use workbench::camera::calibration::run::{run, Options};
-use workbench::camera::calibration::DetectorChoice;
-use workbench::camera::cv::{OpenCv, OpenCvDetect};
+use workbench::calibrate::cv::{OpenCv, OpenCvDetect};
+use workbench::calibrate::run::{run, Options};
+use workbench::calibrate::DetectorChoice;
 use workbench::synth::checkerboard::{generate, CheckerConfig};
 use workbench::synth::session::default_camera;
 
@@ -29,7 +29,7 @@ fn opts(dir: &Path, out: &Path, detector: DetectorChoice) -> Options {
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
-    workbench::camera::cv::set_threads(1);
+    workbench::calibrate::cv::set_threads(1);
     let tmp = tempfile::tempdir().unwrap();
 
     println!("\n### Synthetic checkerboards (1280×960, 15 views, blur 0.7 px, vignetting 0.3, 8-bit PNG)\n");

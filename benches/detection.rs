@@ -14,7 +14,8 @@ mod common;
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 use std::time::Instant;
-use workbench::detect::{self, Detections, Options};
+use workbench::detect::{self, Options};
+use workbench::formats::detections::Detections;
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
 fn detect(dir: &Path) -> Detections {

@@ -17,9 +17,10 @@ use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use workbench::fit::joint::{self, Reduction};
-use workbench::fit::solve::{self, ExtensionChoice, FitFile, Method, Options};
+use workbench::formats::fit::{FitFile, Method};
 use workbench::model::N_PARAMS;
 use workbench::plot::{Layer, Plot, PALETTE};
+use workbench::solve::{self, ExtensionChoice, Options};
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
 fn detect(dir: &Path) -> f64 {

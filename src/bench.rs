@@ -9,8 +9,8 @@
 use crate::detect;
 use crate::error::{Error, Result};
 use crate::fit::joint::Reduction;
-use crate::fit::solve::{self, Options};
 use crate::plot::{Layer, Plot, PALETTE};
+use crate::solve::{self, Options};
 use crate::synth::session::{self, Format, SessionConfig, SessionTruth};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -217,7 +217,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
 
 #[cfg(feature = "opencv")]
 fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
-    use crate::camera::calibration::{run as cal, DetectorChoice};
+    use crate::calibrate::{run as cal, DetectorChoice};
     use crate::synth::checkerboard::{self, CheckerConfig};
     let mut cam = session::default_camera();
     cam.fx *= 0.5;
@@ -253,8 +253,8 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
         let t = Instant::now();
         let r = cal::run(
             &o,
-            &crate::camera::cv::OpenCvDetect,
-            &crate::camera::cv::OpenCv,
+            &crate::calibrate::cv::OpenCvDetect,
+            &crate::calibrate::cv::OpenCv,
         )?;
         let c = &r.calibration.camera;
         rows.push(Row {

@@ -8,6 +8,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bench;
+pub mod calibrate;
 pub mod camera;
 pub mod detect;
 pub mod error;
@@ -18,6 +19,7 @@ pub mod model;
 pub mod plot;
 pub mod progress;
 pub mod render;
+pub mod solve;
 pub mod stats;
 pub mod synth;
 

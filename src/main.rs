@@ -1,10 +1,13 @@
 //! The `workbench` command line, shaped like ripgrep's: parse the arguments ([`cli`]), run the
-//! command ([`commands`]), print an error once, as one line, and exit non-zero.
+//! command ([`commands`]), print its report or its error once, as one line, and exit non-zero on
+//! error. A reader that stops early (`| head`) ends the printing quietly, as for grep; the exit
+//! status stays the command's.
 
 mod cli;
 mod commands;
 
 use clap::Parser;
+use std::io::Write;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -22,11 +25,25 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match commands::run(cli.command, cli.quiet) {
-        Ok(()) => ExitCode::SUCCESS,
+    let report = match commands::run(cli.command, cli.quiet) {
+        Ok(r) => r,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            return ExitCode::FAILURE;
         }
+    };
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = write!(out, "{report}").and_then(|()| out.flush()) {
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("error: writing the report: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
+    match report.failure() {
+        Some(why) => {
+            eprintln!("error: {why}");
+            ExitCode::from(3)
+        }
+        None => ExitCode::SUCCESS,
     }
 }

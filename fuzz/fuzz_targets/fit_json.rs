@@ -1,7 +1,7 @@
 //! fit.json as `workbench plot` reads it: parse, validate, derive the parameters. Must never panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use workbench::fit::solve::FitFile;
+use workbench::formats::fit::FitFile;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(f) = serde_json::from_slice::<FitFile>(data) {

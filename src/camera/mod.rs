@@ -8,9 +8,6 @@
 //!     yd = y·radial + p1 (r² + 2y²) + 2 p2 x y
 //!     u = fx·xd + cx,  v = fy·yd + cy
 
-pub mod calibration;
-#[cfg(feature = "opencv")]
-pub mod cv;
 pub mod outline;
 pub mod sphere;
 
@@ -120,6 +117,25 @@ pub struct Camera {
 pub const UNDISTORT_TOL_PX: f64 = 1e-10;
 
 impl Camera {
+    /// A 1280×960 camera, f = 1400 px, mild barrel distortion: synthetic data's default and the
+    /// tests' camera.
+    pub fn example() -> Camera {
+        Camera {
+            fx: 1400.0,
+            fy: 1400.0,
+            cx: 643.2,
+            cy: 478.5,
+            distortion: Distortion {
+                k1: -0.12,
+                k2: 0.08,
+                p1: 4e-4,
+                p2: -3e-4,
+                k3: 0.0,
+            },
+            image_size: [1280, 960],
+        }
+    }
+
     pub fn width(&self) -> u32 {
         self.image_size[0]
     }

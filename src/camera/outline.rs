@@ -326,7 +326,7 @@ mod tests {
 
     #[test]
     fn s_is_sin_phi_and_mirror_point_reflects() {
-        let cam = crate::synth::session::default_camera();
+        let cam = crate::camera::Camera::example();
         let proj = Projection::Perspective(cam);
         let sp = Sphere::new(Vector3::new(60.0, -40.0, 500.0), 30.0);
         let o = Outline::of_sphere(&sp).unwrap();

@@ -91,9 +91,9 @@ pub(crate) fn parse_reduce(
 
 pub(crate) fn parse_extensions(
     s: &str,
-) -> std::result::Result<workbench::fit::solve::ExtensionChoice, String> {
+) -> std::result::Result<workbench::solve::ExtensionChoice, String> {
     use workbench::fit::joint::Extensions;
-    use workbench::fit::solve::ExtensionChoice;
+    use workbench::solve::ExtensionChoice;
     match s {
         "default" => return Ok(ExtensionChoice::Default),
         "none" => return Ok(ExtensionChoice::None),

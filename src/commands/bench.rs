@@ -1,18 +1,34 @@
 //! `workbench bench`: time and error of every stage.
 
+use super::Report;
 use crate::cli::*;
 use anyhow::{Context, Result};
+use std::fmt;
+use std::path::PathBuf;
+use workbench::bench;
 
-pub(crate) fn bench(a: BenchArgs, quiet: bool) -> Result<()> {
-    use workbench::bench;
+pub(crate) fn bench(a: BenchArgs, quiet: bool) -> Result<Benched> {
     let out = a.out.unwrap_or_else(bench::default_out);
-    let r = bench::run(&bench::BenchOptions {
+    let report = bench::run(&bench::BenchOptions {
         out: out.clone(),
         quick: a.quick,
         quiet,
     })
     .with_context(|| format!("bench into {}", out.display()))?;
-    print!("{}", bench::markdown(&r));
-    println!("wrote    {}", out.join("report.md").display());
-    Ok(())
+    Ok(Benched { report, out })
 }
+
+/// The benchmark's tables and where they were written.
+pub(crate) struct Benched {
+    report: bench::BenchReport,
+    out: PathBuf,
+}
+
+impl fmt::Display for Benched {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "{}", bench::markdown(&self.report))?;
+        writeln!(f, "wrote    {}", self.out.join("report.md").display())
+    }
+}
+
+impl Report for Benched {}

@@ -1,11 +1,16 @@
 //! `workbench solve`: the material fitted to a session; fit.json and its summary.
 
+use super::Report;
 use crate::cli::*;
 use anyhow::{bail, Context, Result};
+use std::fmt;
+use std::path::PathBuf;
+use workbench::formats::fit::FitFile;
 use workbench::model::LightAngles;
 
-pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
-    use workbench::fit::solve::{self, Method, Options};
+pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<Solved> {
+    use workbench::formats::fit::Method;
+    use workbench::solve::{self, Options};
     let _ = a.joint;
     let mut o = Options::new(&a.session);
     o.out = a.out.clone();
@@ -49,25 +54,47 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<()> {
     o.plots = a.plots.clone();
     o.baseline = a.baseline;
     o.quiet = quiet;
-    let f = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;
-    print!("{}", solve::summary(&f));
+    let fit = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;
     let out = a
         .out
-        .unwrap_or_else(|| std::path::Path::new(&f.session).with_file_name("fit.json"));
-    println!("wrote    {}", out.display());
-    if let Some(d) = &a.plots {
-        println!(
-            "figures  {} (open {})",
-            d.display(),
-            d.join("index.html").display()
-        );
+        .unwrap_or_else(|| std::path::Path::new(&fit.session).with_file_name("fit.json"));
+    Ok(Solved {
+        fit,
+        out,
+        plots: a.plots,
+    })
+}
+
+/// A fit written: its summary, where it went.
+pub(crate) struct Solved {
+    fit: FitFile,
+    out: PathBuf,
+    plots: Option<PathBuf>,
+}
+
+impl fmt::Display for Solved {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "{}", workbench::solve::summary(&self.fit))?;
+        writeln!(f, "wrote    {}", self.out.display())?;
+        if let Some(d) = &self.plots {
+            writeln!(
+                f,
+                "figures  {} (open {})",
+                d.display(),
+                d.join("index.html").display()
+            )?;
+        }
+        Ok(())
     }
-    if !f.convergence.converged {
-        eprintln!(
-            "error: the fit did not converge (see convergence in {})",
-            out.display()
-        );
-        std::process::exit(3);
+}
+
+impl Report for Solved {
+    fn failure(&self) -> Option<String> {
+        (!self.fit.convergence.converged).then(|| {
+            format!(
+                "the fit did not converge (see convergence in {})",
+                self.out.display()
+            )
+        })
     }
-    Ok(())
 }

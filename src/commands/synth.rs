@@ -1,13 +1,16 @@
 //! `workbench synth session|checkerboard|pbr`: render ground truth.
 
+use super::Report;
 use crate::cli::*;
 use anyhow::{bail, Context, Result};
+use std::fmt;
+use std::path::PathBuf;
 use workbench::model::{Material, SpecularParams};
 use workbench::synth::checkerboard::{self, BoardFormat, CheckerConfig};
 use workbench::synth::session::{self, Backdrop, Format, Layout, SessionConfig};
 use workbench::synth::volpath;
 
-pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
+pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<SessionWritten> {
     if !(0.0..1.0).contains(&a.kernel_weight) {
         bail!(
             "--kernel-weight must lie in [0, 1), got {}",
@@ -70,17 +73,38 @@ pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<()> {
     let t0 = std::time::Instant::now();
     let out = session::generate(&cfg, &a.out, a.preview.as_deref(), quiet)
         .with_context(|| format!("synth session into {}", a.out.display()))?;
-    println!(
-        "wrote {} image(s), {} and {} in {:.2} s",
-        out.images.len(),
-        out.session_file.display(),
-        out.truth_file.display(),
-        t0.elapsed().as_secs_f64()
-    );
-    Ok(())
+    Ok(SessionWritten {
+        images: out.images.len(),
+        session: out.session_file,
+        truth: out.truth_file,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
-pub(crate) fn synth_pbr(a: PbrArgs, quiet: bool) -> Result<()> {
+/// A synthetic session written.
+pub(crate) struct SessionWritten {
+    images: usize,
+    session: PathBuf,
+    truth: PathBuf,
+    seconds: f64,
+}
+
+impl fmt::Display for SessionWritten {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        writeln!(
+            f,
+            "wrote {} image(s), {} and {} in {:.2} s",
+            self.images,
+            self.session.display(),
+            self.truth.display(),
+            self.seconds
+        )
+    }
+}
+
+impl Report for SessionWritten {}
+
+pub(crate) fn synth_pbr(a: PbrArgs, quiet: bool) -> Result<PbrWritten> {
     let cfg = volpath::PbrConfig {
         radii_mm: a.radii,
         camera: a.camera.camera()?,
@@ -99,24 +123,52 @@ pub(crate) fn synth_pbr(a: PbrArgs, quiet: bool) -> Result<()> {
     let t0 = std::time::Instant::now();
     let out = volpath::generate(&cfg, &a.out, quiet)
         .with_context(|| format!("synth pbr into {}", a.out.display()))?;
-    let noise: Vec<String> = out
-        .truth
-        .images
-        .iter()
-        .map(|p| format!("{:.1}%", 100.0 * p.noise_rel_median_lit))
-        .collect();
-    println!(
-        "wrote {} photo(s), session.json and truth.json into {} in {:.1} s (noise per lit pixel {}; irradiance {:.4} in PNG units)",
-        out.images.len(),
-        a.out.display(),
-        t0.elapsed().as_secs_f64(),
-        noise.join(" "),
-        out.truth.irradiance_in_png_units
-    );
-    Ok(())
+    Ok(PbrWritten {
+        images: out.images.len(),
+        dir: a.out,
+        seconds: t0.elapsed().as_secs_f64(),
+        noise: out
+            .truth
+            .images
+            .iter()
+            .map(|p| p.noise_rel_median_lit)
+            .collect(),
+        irradiance: out.truth.irradiance_in_png_units,
+    })
 }
 
-pub(crate) fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
+/// A physically based session written.
+pub(crate) struct PbrWritten {
+    images: usize,
+    dir: PathBuf,
+    seconds: f64,
+    /// Each photo's median relative noise of a lit pixel.
+    noise: Vec<f64>,
+    irradiance: f64,
+}
+
+impl fmt::Display for PbrWritten {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        let noise: Vec<String> = self
+            .noise
+            .iter()
+            .map(|n| format!("{:.1}%", 100.0 * n))
+            .collect();
+        writeln!(
+            f,
+            "wrote {} photo(s), session.json and truth.json into {} in {:.1} s (noise per lit pixel {}; irradiance {:.4} in PNG units)",
+            self.images,
+            self.dir.display(),
+            self.seconds,
+            noise.join(" "),
+            self.irradiance
+        )
+    }
+}
+
+impl Report for PbrWritten {}
+
+pub(crate) fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<BoardsWritten> {
     let (cols, rows) = a
         .pattern
         .split_once(['x', 'X'])
@@ -150,11 +202,30 @@ pub(crate) fn synth_checkerboard(a: CheckerArgs, quiet: bool) -> Result<()> {
     let t0 = std::time::Instant::now();
     let out = checkerboard::generate(&cfg, &a.out, quiet)
         .with_context(|| format!("synth checkerboard into {}", a.out.display()))?;
-    println!(
-        "wrote {} view(s) and {} in {:.2} s",
-        out.images.len(),
-        out.truth_file.display(),
-        t0.elapsed().as_secs_f64()
-    );
-    Ok(())
+    Ok(BoardsWritten {
+        views: out.images.len(),
+        truth: out.truth_file,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
+
+/// Synthetic checkerboard views written.
+pub(crate) struct BoardsWritten {
+    views: usize,
+    truth: PathBuf,
+    seconds: f64,
+}
+
+impl fmt::Display for BoardsWritten {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        writeln!(
+            f,
+            "wrote {} view(s) and {} in {:.2} s",
+            self.views,
+            self.truth.display(),
+            self.seconds
+        )
+    }
+}
+
+impl Report for BoardsWritten {}

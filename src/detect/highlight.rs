@@ -55,16 +55,7 @@ fn interior(alpha: f64) -> bool {
     (MIN_ALPHA..0.99 * MAX_ALPHA).contains(&alpha)
 }
 
-/// How a highlight was located.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// GGX lobe fitted to the highlight's pixels (a highlight resolved by the pixels).
-    LobeFit,
-    /// Intensity-weighted centroid of the excess over a local plane (a highlight a few pixels
-    /// wide, or clipped with too little of its lobe left).
-    Centroid,
-}
+use crate::formats::detections::Method;
 
 /// A located highlight and the light it implies.
 #[derive(Clone, Debug, PartialEq)]

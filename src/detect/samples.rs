@@ -29,14 +29,7 @@ pub struct Sample {
     pub flags: u8,
 }
 
-/// Counts of a sphere's samples, as `detections.json` reports them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct Counts {
-    pub total: usize,
-    pub saturated: usize,
-    pub edge: usize,
-    pub highlight: usize,
-}
+use crate::formats::detections::Counts;
 
 pub fn counts(s: &[Sample]) -> Counts {
     let n = |f: u8| s.iter().filter(|x| x.flags & f != 0).count();

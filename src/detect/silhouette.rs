@@ -813,7 +813,7 @@ mod tests {
 
     #[test]
     fn ransac_finds_the_rim_among_a_terminator_arc() {
-        let cam = crate::synth::session::default_camera();
+        let cam = crate::camera::Camera::example();
         let proj = Projection::Perspective(cam);
         let s = crate::camera::sphere::Sphere::new(Vector3::new(-30.0, 20.0, 300.0), 15.0);
         let o = Outline::of_sphere(&s).unwrap();

@@ -13,7 +13,7 @@
 
 use crate::error::{Error, Result};
 use crate::fit::observe::SphereData;
-use crate::fit::solve::FitFile;
+use crate::formats::fit::FitFile;
 use crate::model::{Model, Params};
 use crate::plot::{
     colorbar, diverging, Figure, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREEN, GREY, PALETTE,
@@ -665,8 +665,8 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
         })
         .collect();
     let fitted = match fit.method {
-        crate::fit::solve::Method::Joint => "joint fit",
-        crate::fit::solve::Method::Paper => "paper's fit per radius",
+        crate::formats::fit::Method::Joint => "joint fit",
+        crate::formats::fit::Method::Paper => "paper's fit per radius",
     };
     let mut out = vec![
         Named {
@@ -760,33 +760,6 @@ pub fn write_all(
     let mut out: Vec<PathBuf> = files.into_iter().flat_map(|(a, b)| [a, b]).collect();
     out.push(index);
     Ok(out)
-}
-
-/// `workbench plot <fit.json>`: redraw a fit's figures from fit.json and its session, without
-/// solving. The session is the one fit.json names (or session.json beside fit.json when that
-/// has moved); detections are reused when up to date.
-pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
-    let fit: FitFile = crate::formats::output::read_json(fit_path)?;
-    fit.validate(fit_path)?;
-    let session = fit.session_path(fit_path)?;
-    let mut opts = crate::fit::solve::Options::new(&session);
-    opts.quiet = quiet;
-    let l = crate::fit::solve::load(&opts)?;
-    let same = l.spheres.len() == fit.rmse.spheres.len()
-        && l.spheres
-            .iter()
-            .zip(&fit.rmse.spheres)
-            .all(|(a, b)| a.image == b.image && a.index == b.index && a.radius_mm == b.radius_mm);
-    if !same {
-        return Err(Error::invalid(
-            fit_path,
-            format!(
-                "describes other spheres than {} holds now",
-                session.display()
-            ),
-        ));
-    }
-    write_all(&fit, fit_path, &l.spheres, dir)
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 
 use crate::error::Result;
 use crate::figures::fitplot::Named;
-use crate::fit::solve::{FitFile, Method};
+use crate::formats::fit::{FitFile, Method};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 

@@ -21,6 +21,7 @@
 use crate::fit::observe::SphereData;
 use crate::fit::reduce::Pooled;
 use crate::fit::solver::{self, Fit, Obs, Prior};
+use crate::formats::fit::{Level, LightPull, Stage};
 use crate::model::fresnel;
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use nalgebra::Vector3;
@@ -153,22 +154,6 @@ impl LightFit {
     }
 }
 
-/// One stage's convergence record.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage {
-    pub name: String,
-    pub observations: usize,
-    pub free: Vec<String>,
-    pub evaluations: usize,
-    pub termination: String,
-    pub converged: bool,
-    pub cost_start: f64,
-    pub cost_end: f64,
-    /// ½Σr² at every residual evaluation (trial steps included).
-    pub cost_history: Vec<f64>,
-    pub seconds: f64,
-}
-
 impl Stage {
     fn of(name: &str, obs: usize, f: &Fit, t: std::time::Instant) -> Stage {
         Stage {
@@ -187,23 +172,6 @@ impl Stage {
             seconds: t.elapsed().as_secs_f64(),
         }
     }
-}
-
-/// A reduction level as considered.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Level {
-    /// Cell width (degrees; 0 = every pixel).
-    pub width_deg: f64,
-    /// Highlight pixels pooled in blocks of this many pixels square (1: one by one).
-    pub highlight_block_px: u32,
-    pub observations: usize,
-    /// Predicted largest parameter shift, in standard errors.
-    pub predicted_shift_std: f64,
-    /// Every parameter's predicted shift is below [`SHIFT_LIMIT`] standard errors or below its
-    /// tolerance ([`crate::fit::reduce::tolerance`]).
-    pub within_tolerance: bool,
-    /// The parameter whose predicted shift is largest against what is accepted for it.
-    pub limiting: Option<String>,
 }
 
 /// What [`fit_joint`] returns.
@@ -1026,19 +994,6 @@ fn choose_reduction(
         limiting: tried.and_then(|l| l.limiting.clone()),
     };
     (final_obs, chosen, levels)
-}
-
-/// The light's move from the detector's estimate in the joint fit.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LightPull {
-    /// Angle between the fitted light and the detector's (degrees).
-    pub moved_deg: f64,
-    /// The detector's standard error (degrees).
-    pub detector_std_deg: f64,
-    /// The prior's width (degrees; null without a prior, `--free-light`).
-    pub prior_std_deg: Option<f64>,
-    /// `moved_deg` over the prior's width (or the detector's error without one).
-    pub pull: f64,
 }
 
 /// A pull of the light beyond this many standard errors gets a note.

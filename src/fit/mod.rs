@@ -1,10 +1,9 @@
 //! From photos to the material: observations from the detected spheres ([`observe`]),
 //! pooled ([`reduce`]), fitted by least squares ([`solver`]) in the joint fit's stages ([`joint`]),
-//! beside the paper's procedure ([`paper`]), driven by the `solve` command ([`solve`]).
+//! beside the paper's procedure ([`paper`]). The `solve` job that drives them is [`crate::solve`].
 
 pub mod joint;
 pub mod observe;
 pub mod paper;
 pub mod reduce;
-pub mod solve;
 pub mod solver;

@@ -20,9 +20,9 @@
 
 use crate::camera::outline::Projection;
 use crate::detect::samples::{self, Sample};
-use crate::detect::Detections;
 use crate::error::{Error, Result};
 use crate::fit::solver::Obs;
+use crate::formats::detections::Detections;
 use crate::formats::photo::load_linear_rgb;
 use crate::formats::session::{Session, SessionReport};
 use crate::model::Geometry;

@@ -9,31 +9,16 @@ use crate::fit::joint::Prediction;
 use crate::fit::observe::SphereData;
 use crate::fit::reduce::Pooled;
 use crate::fit::solver::{self, Obs};
+use crate::formats::fit::RadiusFit;
 use crate::model::fresnel;
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS};
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
 /// Pixels whose normal lies within this angle of the half vector are masked (at least; twice the
 /// detector's highlight radius when that is larger).
 pub const MASK_DEG: f64 = 10.0;
 /// Cell width of the per-radius fits (factor of 0.25°): 1°.
 pub const FACTOR: u32 = 4;
-
-/// One radius's fit.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RadiusFit {
-    pub radius_mm: f64,
-    pub spheres: usize,
-    pub pixels: usize,
-    /// Fitted blur width σ (radians) and σ0 = σ · r (mm), per channel, with standard errors.
-    pub sigma_rad: [f64; 3],
-    pub sigma0_mm: [f64; 3],
-    pub sigma0_std: [f64; 3],
-    pub albedo: [f64; 3],
-    pub albedo_std: [f64; 3],
-    pub converged: bool,
-}
 
 /// The baseline's result.
 #[derive(Clone, Debug)]

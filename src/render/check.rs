@@ -129,7 +129,7 @@ pub fn compare(
 /// Every sphere of the fit's session (`fit`, read from `fit_path`), as the detector placed it
 /// (needs a perspective session: intrinsics and detections.json with sphere centres).
 pub fn check_fit(
-    fit: &crate::fit::solve::FitFile,
+    fit: &crate::formats::fit::FitFile,
     fit_path: &Path,
     fm: &FitMaterial,
     lut: &Lut,
@@ -143,7 +143,7 @@ pub fn check_fit(
         )
     })?;
     let det_path = session.with_file_name("detections.json");
-    let det: crate::detect::Detections = crate::formats::output::read_json(&det_path)?;
+    let det: crate::formats::detections::Detections = crate::formats::output::read_json(&det_path)?;
     let pin = Pinhole {
         fx: cam.fx,
         fy: cam.fy,

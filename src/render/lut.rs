@@ -15,7 +15,7 @@
 //! edge midpoints; [`choose`] picks the smallest size of [`SIZES`] within a tolerance.
 
 use crate::error::{Error, Result};
-use crate::fit::solve::FitFile;
+use crate::formats::fit::FitFile;
 use crate::formats::output::{write_bytes, write_json};
 use crate::formats::photo::write_png16_rgb;
 use crate::model::{Material, Model, Rgb};

@@ -121,22 +121,9 @@ pub struct SessionConfig {
     pub sensor_width_mm: f64,
 }
 
-/// The default camera of synthetic data: 1280×960, f = 1400 px, mild barrel distortion.
+/// The default camera of synthetic data: [`Camera::example`].
 pub fn default_camera() -> Camera {
-    Camera {
-        fx: 1400.0,
-        fy: 1400.0,
-        cx: 643.2,
-        cy: 478.5,
-        distortion: crate::camera::Distortion {
-            k1: -0.12,
-            k2: 0.08,
-            p1: 4e-4,
-            p2: -3e-4,
-            k3: 0.0,
-        },
-        image_size: [1280, 960],
-    }
+    Camera::example()
 }
 
 impl Default for SessionConfig {

@@ -3,7 +3,7 @@
 
 use crate::common;
 use nalgebra::Vector3;
-use workbench::camera::calibration::{project_with_jacobian, Pose};
+use workbench::calibrate::{project_with_jacobian, Pose};
 use workbench::camera::{Camera, Distortion};
 
 fn camera() -> Camera {
@@ -130,10 +130,10 @@ mod with_opencv {
     use nalgebra::Vector2;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use workbench::camera::calibration::run::{self, Options};
-    use workbench::camera::calibration::{self, DistortionModel, Pattern};
-    use workbench::camera::calibration::{Backend, DetectorChoice, View};
-    use workbench::camera::cv::{OpenCv, OpenCvDetect};
+    use workbench::calibrate::cv::{OpenCv, OpenCvDetect};
+    use workbench::calibrate::run::{self, Options};
+    use workbench::calibrate::{self, DistortionModel, Pattern};
+    use workbench::calibrate::{Backend, DetectorChoice, View};
 
     fn synthetic_corners(sigma: f64, seed: u64) -> Vec<Vec<Vector2<f64>>> {
         let cam = camera();
@@ -167,7 +167,7 @@ mod with_opencv {
             let sol = OpenCv
                 .calibrate(&refs, &obj, [640, 480], DistortionModel::K1K2P1P2K3)
                 .unwrap();
-            let (sd, _) = calibration::intrinsic_uncertainty(
+            let (sd, _) = calibrate::intrinsic_uncertainty(
                 &sol.camera,
                 &sol.poses,
                 &refs,
@@ -208,7 +208,7 @@ mod with_opencv {
                 detector: "classic",
             })
             .collect();
-        let cal = calibration::calibrate(&OpenCv, views, &obj, [640, 480]).unwrap();
+        let cal = calibrate::calibrate(&OpenCv, views, &obj, [640, 480]).unwrap();
         let rejected: Vec<&str> = cal
             .rejected
             .iter()
@@ -276,7 +276,7 @@ mod with_opencv {
         assert_eq!(j["schema"], "workbench.intrinsics/1");
         assert_eq!(j["views"].as_array().unwrap().len(), 14);
         assert!(j["std"]["fx"].as_f64().unwrap() > 0.0);
-        let back = workbench::camera::cv::read_filestorage_yaml(
+        let back = workbench::calibrate::cv::read_filestorage_yaml(
             &std::fs::read_to_string(&r.yaml_file).unwrap(),
         )
         .unwrap();

@@ -4,7 +4,8 @@
 use crate::common;
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
-use workbench::detect::{self, Detections, Options};
+use workbench::detect::{self, Options};
+use workbench::formats::detections::{Detections, OutlineJson};
 use workbench::synth::session::{self, Layout, SessionConfig, SessionTruth};
 
 fn run(dir: &Path) -> workbench::Result<Detections> {
@@ -253,7 +254,7 @@ fn orthographic_without_intrinsics_and_no_highlight() {
     for (im, ti) in d.images.iter().zip(&t.images) {
         let s = &im.spheres[0];
         assert!(s.center_mm.is_none());
-        assert!(matches!(s.outline, detect::OutlineJson::Circle { .. }));
+        assert!(matches!(s.outline, OutlineJson::Circle { .. }));
         let dc = (Vector2::from(s.ellipse.center_px)
             - Vector2::from(ti.spheres[0].ellipse.center_px))
         .norm();
@@ -404,7 +405,7 @@ fn clipped_highlights_are_fitted_and_refined() {
                 h.alpha.unwrap_or(f64::NAN)
             );
             assert!((0.05..0.30).contains(&clipped), "{clipped}");
-            assert_eq!(h.method, workbench::detect::highlight::Method::LobeFit);
+            assert_eq!(h.method, workbench::formats::detections::Method::LobeFit);
             // The roughness from the ring alone: measured within 15% up to 10% clipped, within
             // 45% at 22% and 31% at 29%.
             let tol = if clipped < 0.1 { 0.25 } else { 0.6 };
@@ -420,10 +421,10 @@ fn clipped_highlights_are_fitted_and_refined() {
         println!("α {alpha} ks {ks}: session light {dl:.3}° ± {std:.3}°");
         assert!(dl < 3.0 * std, "{dl}° ± {std}°");
         // The solve: the light within 0.1° of the truth (the goal).
-        let mut o = workbench::fit::solve::Options::new(dir.path());
+        let mut o = workbench::solve::Options::new(dir.path());
         o.jackknife = false;
         o.quiet = true;
-        let f = workbench::fit::solve::run(&o).unwrap();
+        let f = workbench::solve::run(&o).unwrap();
         let dl = Vector3::from(f.light_direction)
             .angle(&Vector3::from(t.light_direction))
             .to_degrees();
@@ -453,10 +454,10 @@ fn grey_backdrop_and_table() {
         dir
     };
     let solve = |dir: &Path| {
-        let mut o = workbench::fit::solve::Options::new(dir);
+        let mut o = workbench::solve::Options::new(dir);
         o.jackknife = false;
         o.quiet = true;
-        workbench::fit::solve::run(&o).unwrap()
+        workbench::solve::run(&o).unwrap()
     };
     let black = make(Backdrop::Black, false);
     run(black.path()).unwrap();
@@ -493,7 +494,7 @@ fn grey_backdrop_and_table() {
             f.notes
         );
         let fl = f.dark_floor.expect("the floor is fitted");
-        let sigma0_off = |f: &workbench::fit::solve::FitFile| {
+        let sigma0_off = |f: &workbench::formats::fit::FitFile| {
             (0..3)
                 .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
                 .fold(0.0, f64::max)

@@ -7,7 +7,8 @@ use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use workbench::fit::joint::{Extensions, LightFit, Reduction};
-use workbench::fit::solve::{self, ExtensionChoice, FitFile, Method, Options};
+use workbench::formats::fit::{FitFile, Method};
+use workbench::solve::{self, ExtensionChoice, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// A 640×480 camera: a quarter of the default's pixels, so that the tests stay fast.
@@ -207,7 +208,7 @@ fn paper_baseline_and_holdout() {
     assert!(p.specular.is_none());
     assert_eq!(p.method, Method::Paper);
     // The light is the detector's, not refined.
-    let d: workbench::detect::Detections =
+    let d: workbench::formats::detections::Detections =
         serde_json::from_str(&std::fs::read_to_string(dir.join("detections.json")).unwrap())
             .unwrap();
     let dl = Vector3::from(d.light_direction.unwrap());
@@ -511,7 +512,7 @@ fn figures_are_written_and_redrawn_from_fit_json() {
     assert!(!index.contains("http"), "index.html links outside");
     // Redrawn from fit.json without solving: the same pictures, byte for byte.
     let again = dir.join("replot");
-    let files = workbench::figures::fitplot::replot(&fit_path, &again, true).unwrap();
+    let files = workbench::solve::replot(&fit_path, &again, true).unwrap();
     for file in files
         .iter()
         .filter(|p| p.extension().is_some_and(|e| e == "png"))
@@ -526,7 +527,7 @@ fn figures_are_written_and_redrawn_from_fit_json() {
     // A fit.json that is not one: refused with the file named.
     let bad = dir.join("not-a-fit.json");
     std::fs::write(&bad, r#"{"schema": "workbench.fit/0"}"#).unwrap();
-    let e = workbench::figures::fitplot::replot(&bad, &dir.join("never"), true)
+    let e = workbench::solve::replot(&bad, &dir.join("never"), true)
         .unwrap_err()
         .to_string();
     assert!(e.contains("not-a-fit.json") && !e.contains('\n'), "{e}");

@@ -13,8 +13,9 @@ use crate::common;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
-use workbench::fit::solve::{self, FitFile, Options};
+use workbench::formats::fit::FitFile;
 use workbench::model::{Geometry, LightAngles, Model, Params};
+use workbench::solve::{self, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 #[derive(Debug, PartialEq)]

@@ -5,7 +5,8 @@ use crate::common;
 
 use nalgebra::Vector3;
 use std::path::Path;
-use workbench::fit::solve::{self, FitFile, Options};
+use workbench::formats::fit::FitFile;
+use workbench::solve::{self, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// One synthetic session (640×480, five radii, 1% noise) for a noise seed. At 320×240 (spheres
@@ -28,7 +29,7 @@ fn solve(dir: &Path, f: impl FnOnce(&mut Options)) -> FitFile {
     solve::run(&o).unwrap()
 }
 
-fn param<'a>(f: &'a FitFile, name: &str) -> &'a workbench::fit::solve::ParamJson {
+fn param<'a>(f: &'a FitFile, name: &str) -> &'a workbench::formats::fit::ParamJson {
     f.parameters.iter().find(|p| p.name == name).unwrap()
 }
 
@@ -154,7 +155,7 @@ fn jade_errors_are_covered_or_flagged() {
     let pull = f
         .light_pull
         .expect("the detector's light and its error are known");
-    let d: workbench::detect::Detections =
+    let d: workbench::formats::detections::Detections =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("detections.json")).unwrap())
             .unwrap();
     let det_err = Vector3::from(d.light_direction.unwrap())

@@ -1,9 +1,11 @@
 //! Camera calibration from chessboard views: everything that is not OpenCV. The detector and the
-//! solver behind [`Backend`] come from OpenCV ([`crate::camera::cv`]); this module decides what to
+//! solver behind [`Backend`] come from OpenCV ([`crate::calibrate::cv`]); this module decides what to
 //! trust: the distortion model by held-out error, outlier views, standard deviations from the
 //! Jacobian (OpenCV 4.6's own formula is known to be wrong, opencv issue 19803), k-fold
 //! cross-validation, frame coverage, tilt range and the EXIF sanity checks.
 
+#[cfg(feature = "opencv")]
+pub mod cv;
 pub mod plots;
 pub mod run;
 

@@ -2,7 +2,7 @@
 //! `opencv` cargo feature. Inputs and outputs are plain Rust / nalgebra types: images arrive as
 //! [`Gray8`], corners leave as `Vector2<f64>`, calibrations as [`Camera`] and [`Pose`].
 
-use crate::camera::calibration::{Backend, Detector, DistortionModel, Pattern, Pose, Solution};
+use crate::calibrate::{Backend, Detector, DistortionModel, Pattern, Pose, Solution};
 use crate::camera::{Camera, Distortion};
 use crate::error::{Error, Result};
 use crate::formats::photo::Gray8;
@@ -351,10 +351,10 @@ pub fn read_filestorage_yaml(text: &str) -> Result<Camera> {
     camera_from_mats(&k, &d, [w as u32, h as u32])
 }
 
-/// OpenCV's detectors for [`crate::camera::calibration::run`].
+/// OpenCV's detectors for [`crate::calibrate::run`].
 pub struct OpenCvDetect;
 
-impl crate::camera::calibration::run::Detect for OpenCvDetect {
+impl crate::calibrate::run::Detect for OpenCvDetect {
     fn detect(
         &self,
         img: &Gray8,

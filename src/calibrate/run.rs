@@ -42,7 +42,7 @@ pub struct Report {
     pub calibration_s: f64,
 }
 
-/// Detectors a calibration can use (implemented by OpenCV in [`crate::camera::cv`]).
+/// Detectors a calibration can use (implemented by OpenCV in [`crate::calibrate::cv`]).
 pub trait Detect: Sync {
     /// The chessboard's inner corners by one detector; `None` when it finds no board.
     fn detect(

@@ -1,0 +1,466 @@
+//! `fit.json` (schema `workbench.fit/1`): a measured material as `workbench solve` writes it —
+//! the parameters with their standard errors and how each was obtained, the fit's convergence,
+//! its error per sphere, the choices made and why — as the figures, `workbench lut` and
+//! `workbench render` read it. docs/formats.md describes every field.
+
+use crate::error::{Error, Result};
+use crate::model::{LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub const SCHEMA: &str = "workbench.fit/1";
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    #[default]
+    Joint,
+    Paper,
+}
+
+/// A specular lobe as written.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpecularJson {
+    pub ks: f64,
+    pub alpha: f64,
+}
+
+/// Standard errors, mirroring the values.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StdJson {
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub eta: f64,
+    pub specular: Option<SpecularJson>,
+    /// Angular standard error of the light direction (degrees; from the two angles').
+    pub light_deg: f64,
+    pub sigma_exponent: Option<f64>,
+    pub albedo_curvature: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelJson>,
+}
+
+/// The two-Gaussian kernel: (1 − weight)·f(θ; σ) + weight·f(θ; ratio·σ).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KernelJson {
+    pub weight: f64,
+    pub ratio: f64,
+}
+
+/// One parameter, flat.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParamJson {
+    pub name: String,
+    pub value: f64,
+    /// The standard error stated: see `FitFile::std_source`.
+    pub std: f64,
+    /// From σ²(JᵀJ)⁻¹ (noise only, the model taken as exact).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_formal: Option<f64>,
+    /// The leave-one-radius-out jackknife spread (model error across radii included).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_jackknife: Option<f64>,
+    /// The factor `std` took because the data and the parameter's prior disagree (PDG scale
+    /// factor, docs/uncertainty.md; absent when 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_tension: Option<f64>,
+    /// "fitted", "fixed", "prior …", "off: …".
+    pub status: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CorrelationJson {
+    pub names: Vec<String>,
+    pub matrix: Vec<Vec<f64>>,
+}
+
+/// A dark floor fitted with the material: pixel values (full scale 1) per channel.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DarkFloorJson {
+    pub value: [f64; 3],
+    pub std: [f64; 3],
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SphereRmse {
+    pub image: String,
+    pub index: usize,
+    pub radius_mm: f64,
+    /// Pixels used by the fit (saturated and edge pixels left out) and how many were left out.
+    pub pixels: usize,
+    pub saturated: usize,
+    pub edge: usize,
+    /// Pixel noise σ per channel (radiance units), as measured.
+    pub noise: [f64; 3],
+    /// The photo's dark floor, subtracted before fitting (null: not measurable).
+    pub floor: Option<[f64; 3]>,
+    pub rmse: f64,
+    pub rel_rmse: f64,
+    pub lit_rel_rmse: f64,
+    pub unlit_rel_rmse: f64,
+    /// Held out of the fit.
+    pub held_out: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RmseJson {
+    /// Over all spheres' pixels (radiance units), and relative to their RMS.
+    pub overall: f64,
+    pub relative: f64,
+    pub spheres: Vec<SphereRmse>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HoldoutJson {
+    pub radius_mm: f64,
+    pub pixels: usize,
+    pub rel_rmse: f64,
+    pub lit_rel_rmse: f64,
+    pub unlit_rel_rmse: f64,
+}
+
+/// The leave-one-radius-out refits of a joint fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JackknifeJson {
+    /// The radii left out in turn (mm).
+    pub radii: Vec<f64>,
+    /// Each left-out radius predicted by the fit to the others.
+    pub heldout: Vec<HoldoutJson>,
+    /// Pixel-weighted mean of the held-out relative RMSE.
+    pub heldout_rel_rmse: f64,
+    /// Every refit converged.
+    pub converged: bool,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReductionJson {
+    pub setting: String,
+    pub pixels: usize,
+    /// The level used (width 0: every pixel).
+    pub chosen: Level,
+    /// Levels tried, coarsest first (with `auto`).
+    pub levels: Vec<Level>,
+    pub shift_limit_std: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConvergenceJson {
+    pub converged: bool,
+    pub stages: Vec<Stage>,
+    /// Channel residuals down-weighted by the Huber loss in the last round.
+    pub downweighted: usize,
+    pub robust_loss: Option<String>,
+    /// χ²/dof of the joint fit against the measured pixel noise (its square root: the residuals
+    /// over the noise); null for the paper's method and in older files.
+    #[serde(default)]
+    pub chi2_per_dof: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub extensions: String,
+    /// Mean over radii of the held-out relative RMSE (each radius left out in turn).
+    pub heldout_rel_rmse: f64,
+    pub converged: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelChoice {
+    pub candidates: Vec<Candidate>,
+    pub chosen: String,
+    pub reason: String,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timings {
+    pub inspect_s: f64,
+    pub detect_s: f64,
+    pub decode_s: f64,
+    pub samples_s: f64,
+    pub solve_s: f64,
+    pub model_choice_s: f64,
+    pub holdout_s: f64,
+    /// The leave-one-radius-out refits.
+    #[serde(default)]
+    pub jackknife_s: f64,
+    pub total_s: f64,
+    /// The solve stage's phases (joint method), seconds.
+    #[serde(default)]
+    pub solve_phases: Vec<(String, f64)>,
+}
+
+/// `fit.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitFile {
+    pub schema: String,
+    pub method: Method,
+    pub session: String,
+    pub detections: String,
+    pub projection: String,
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub eta: f64,
+    /// Null when no lobe was fitted.
+    pub specular: Option<SpecularJson>,
+    pub light_direction: [f64; 3],
+    pub light_azimuth_deg: f64,
+    pub light_elevation_deg: f64,
+    /// Under `"light": "per-image"`: each photo's fitted light (`light_direction` is the first's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub image_lights: Vec<ImageLightJson>,
+    /// The extensions' values when on (see `model`), with the reference radius.
+    pub sigma_exponent: Option<f64>,
+    pub albedo_curvature: Option<f64>,
+    /// The kernel's shape when it is two Gaussians (null: one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelJson>,
+    pub reference_radius_mm: f64,
+    /// The diffuse term blurs the irradiance transmitted into the medium (entry-side Fresnel,
+    /// docs/model.md); false for the paper's procedure and in files written before it.
+    #[serde(default)]
+    pub entry_transmission: bool,
+    pub std: StdJson,
+    /// What `std` is: "formal" (σ²(JᵀJ)⁻¹) or "larger of formal and jackknife" per parameter.
+    #[serde(default)]
+    pub std_source: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jackknife: Option<JackknifeJson>,
+    /// How the light was treated: "prior" (the detector's light as a prior), "free", "hold", or
+    /// "prior, then hold" (the shading pulled the light beyond PULL_WARN of its errors, so it was
+    /// held at the detector's; `light_pull` says how far).
+    #[serde(default)]
+    pub light_fit: String,
+    /// How far the fit moved the detector's light, in the prior's (or detector's) errors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_pull: Option<LightPull>,
+    /// The dark floor fitted with the material when no photo measured one (absent otherwise:
+    /// each sphere's `floor` in `rmse` is the one subtracted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_floor: Option<DarkFloorJson>,
+    pub parameters: Vec<ParamJson>,
+    pub correlation: CorrelationJson,
+    pub rmse: RmseJson,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<HoldoutJson>,
+    /// The paper's per-radius fits (method "paper").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_radius: Option<Vec<RadiusFit>>,
+    /// The paper's baseline run beside a joint fit, for comparison (needs the detector's light).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline: Option<BaselineJson>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_choice: Option<ModelChoice>,
+    pub reduction: Option<ReductionJson>,
+    pub convergence: ConvergenceJson,
+    /// What was skipped or reused, and why.
+    pub skipped: Vec<String>,
+    pub notes: Vec<String>,
+    pub timings: Timings,
+    /// What decides the result besides the inputs (method, priors, reduction, …): a later run with
+    /// the same options on unchanged inputs reuses this file.
+    #[serde(default)]
+    pub options: String,
+}
+
+/// The paper's baseline beside a joint fit: its assumptions and per-radius fits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaselineJson {
+    /// η divided out, the light taken from the detector (degrees), the mask around the peak.
+    pub eta: f64,
+    pub light_azimuth_deg: f64,
+    pub light_elevation_deg: f64,
+    pub mask_deg: f64,
+    /// Combined over radii.
+    pub sigma0_mm: [f64; 3],
+    pub albedo: [f64; 3],
+    pub per_radius: Vec<RadiusFit>,
+    pub seconds: f64,
+}
+
+impl BaselineJson {
+    /// The baseline's parameters for a radius: its own fit, or the combined one for a radius it
+    /// did not fit (held out).
+    pub fn params_for(&self, radius_mm: f64) -> Params {
+        let light = LightAngles {
+            azimuth: self.light_azimuth_deg.to_radians(),
+            elevation: self.light_elevation_deg.to_radians(),
+        };
+        match self
+            .per_radius
+            .iter()
+            .find(|r| (r.radius_mm - radius_mm).abs() < 1e-9)
+        {
+            Some(r) => Params::diffuse(r.sigma0_mm, r.albedo, self.eta, light),
+            None => Params::diffuse(self.sigma0_mm, self.albedo, self.eta, light),
+        }
+    }
+}
+
+impl FitFile {
+    /// The model the fit's parameters belong to: its reference radius, and the entry
+    /// transmission unless the file predates it or is the paper's procedure.
+    pub fn model(&self) -> Model {
+        Model {
+            reference_radius_mm: self.reference_radius_mm,
+            entry_fresnel: self.entry_transmission,
+            ..Model::default()
+        }
+    }
+
+    /// The fitted parameters (all of them, as in `parameters`; a missing one reads 0).
+    pub fn params(&self) -> Params {
+        let mut v = [0.0; N_PARAMS];
+        for p in &self.parameters {
+            if let Some(k) = PARAM_NAMES.iter().position(|n| *n == p.name) {
+                v[k] = p.value;
+            }
+        }
+        Params::from_vec(&v)
+    }
+
+    /// The parameters that predict spheres of a radius: the fit's, or for the paper's method that
+    /// radius's own fit (the combined one for a held-out radius).
+    pub fn params_for(&self, radius_mm: f64) -> Params {
+        let mut p = self.params();
+        if let Some(r) = self
+            .per_radius
+            .as_ref()
+            .and_then(|pr| pr.iter().find(|r| (r.radius_mm - radius_mm).abs() < 1e-9))
+        {
+            p.material.sigma0_mm = r.sigma0_mm;
+            p.material.albedo = r.albedo;
+        }
+        p
+    }
+
+    /// The session this fit was solved on: the file it names, or session.json beside the fit
+    /// when that has moved.
+    pub fn session_path(&self, fit_path: &Path) -> Result<PathBuf> {
+        let named = PathBuf::from(&self.session);
+        let beside = fit_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("session.json");
+        if named.is_file() {
+            Ok(named)
+        } else if beside.is_file() {
+            Ok(beside)
+        } else {
+            Err(Error::invalid(
+                fit_path,
+                format!(
+                    "its session {} is gone and no session.json lies beside it",
+                    self.session
+                ),
+            ))
+        }
+    }
+
+    /// Check what was read: schema and parameter names.
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        if self.schema != SCHEMA {
+            return Err(Error::invalid(
+                file,
+                format!("schema {:?}, expected {SCHEMA:?}", self.schema),
+            ));
+        }
+        for name in PARAM_NAMES {
+            match self.parameters.iter().find(|p| p.name == name) {
+                Some(p) if p.value.is_finite() => {}
+                Some(_) => {
+                    return Err(Error::invalid(
+                        file,
+                        format!("parameter {name} is not finite"),
+                    ))
+                }
+                // Written before the kernel's shape was a parameter: one Gaussian.
+                None if name.starts_with("kernel_") => {}
+                None => return Err(Error::invalid(file, format!("parameter {name} missing"))),
+            }
+        }
+        let m = self.params().material;
+        if !(0.0..1.0).contains(&m.kernel_weight)
+            || (m.kernel_weight > 0.0 && !(m.kernel_ratio > 1.0))
+        {
+            return Err(Error::invalid(
+                file,
+                format!(
+                    "kernel_weight {} must lie in [0, 1) and kernel_ratio {} above 1 when it is not 0",
+                    m.kernel_weight, m.kernel_ratio
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One photo's light under `"light": "per-image"`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImageLightJson {
+    pub file: String,
+    pub direction: [f64; 3],
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+}
+
+/// One stage's convergence record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage {
+    pub name: String,
+    pub observations: usize,
+    pub free: Vec<String>,
+    pub evaluations: usize,
+    pub termination: String,
+    pub converged: bool,
+    pub cost_start: f64,
+    pub cost_end: f64,
+    /// ½Σr² at every residual evaluation (trial steps included).
+    pub cost_history: Vec<f64>,
+    pub seconds: f64,
+}
+
+/// A reduction level as considered.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Level {
+    /// Cell width (degrees; 0 = every pixel).
+    pub width_deg: f64,
+    /// Highlight pixels pooled in blocks of this many pixels square (1: one by one).
+    pub highlight_block_px: u32,
+    pub observations: usize,
+    /// Predicted largest parameter shift, in standard errors.
+    pub predicted_shift_std: f64,
+    /// Every parameter's predicted shift is below `SHIFT_LIMIT` (fit::joint) standard errors or below its
+    /// tolerance (`fit::reduce::tolerance`).
+    pub within_tolerance: bool,
+    /// The parameter whose predicted shift is largest against what is accepted for it.
+    pub limiting: Option<String>,
+}
+
+/// The light's move from the detector's estimate in the joint fit.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightPull {
+    /// Angle between the fitted light and the detector's (degrees).
+    pub moved_deg: f64,
+    /// The detector's standard error (degrees).
+    pub detector_std_deg: f64,
+    /// The prior's width (degrees; null without a prior, `--free-light`).
+    pub prior_std_deg: Option<f64>,
+    /// `moved_deg` over the prior's width (or the detector's error without one).
+    pub pull: f64,
+}
+
+/// One radius's fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RadiusFit {
+    pub radius_mm: f64,
+    pub spheres: usize,
+    pub pixels: usize,
+    /// Fitted blur width σ (radians) and σ0 = σ · r (mm), per channel, with standard errors.
+    pub sigma_rad: [f64; 3],
+    pub sigma0_mm: [f64; 3],
+    pub sigma0_std: [f64; 3],
+    pub albedo: [f64; 3],
+    pub albedo_std: [f64; 3],
+    pub converged: bool,
+}

@@ -1,0 +1,141 @@
+//! The joint fit's setup from the options, and the model extensions chosen by held-out error.
+
+use super::*;
+
+pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> Setup {
+    Setup {
+        model: Model {
+            entry_fresnel: opts.entry_transmission,
+            ..Model::default()
+        },
+        light: l.light,
+        highlight_radius: l.highlight_radius,
+        alpha: l.alpha,
+        eta_prior: opts.eta_prior,
+        irradiance: opts.irradiance,
+        reduction,
+        robust: opts.robust,
+        extensions: ext,
+        start_sigma0: opts.start_sigma0,
+        start_light: opts.start_light,
+        warm: None,
+        light_fit: opts.light_fit,
+        light_std: l.light_std,
+        floor: l.fit_floor && opts.method == Method::Joint,
+    }
+}
+
+/// Choose the extensions by held-out error: each candidate is fitted with every radius left out
+/// in turn (4° cells: the choice compares errors of percents, not of standard errors) and
+/// predicts that radius's pixels; the candidate with the lowest mean
+/// relative RMSE (the simplest within 1% of it) wins if it beats the plain model by more than 2%
+/// of its error.
+pub fn choose_extensions(
+    opts: &Options,
+    l: &Loaded,
+    fitted: &[&SphereData],
+) -> (ModelChoice, Extensions) {
+    let radii = distinct_radii(fitted);
+    // Simplest first: one extension (the kernel's shape first), then pairs.
+    let ext = |two_gaussian, sigma_exponent, albedo_curvature| Extensions {
+        sigma_exponent,
+        albedo_curvature,
+        two_gaussian,
+    };
+    let candidates = [
+        Extensions::default(),
+        ext(true, false, false),
+        ext(false, true, false),
+        ext(false, false, true),
+        ext(true, false, true),
+        ext(false, true, true),
+    ];
+    if radii.len() < 4 {
+        let plain = ModelChoice {
+            candidates: vec![],
+            chosen: "plain".into(),
+            reason: format!(
+                "{} radii: leaving one out leaves fewer than the 3 an extension needs",
+                radii.len()
+            ),
+        };
+        return (plain, Extensions::default());
+    }
+    // Every refit starts from the plain model's fit to all the spheres.
+    let base = joint::fit_joint(
+        &setup(opts, l, Extensions::default(), Reduction::Factor(16)),
+        fitted,
+    );
+    let results: Vec<Candidate> = candidates
+        .iter()
+        .map(|&ext| {
+            let mut errs = vec![];
+            let mut ok = true;
+            for &r in &radii {
+                let train: Vec<&SphereData> = fitted
+                    .iter()
+                    .copied()
+                    .filter(|s| s.radius_mm != r)
+                    .collect();
+                let test: Vec<&SphereData> = fitted
+                    .iter()
+                    .copied()
+                    .filter(|s| s.radius_mm == r)
+                    .collect();
+                let mut su = setup(opts, l, ext, Reduction::Factor(16));
+                su.warm = Some(base.fit.params);
+                let jf = joint::fit_joint(&su, &train);
+                ok &= jf.fit.converged;
+                let (mut d, mut o) = (0.0, 0.0);
+                for s in test {
+                    let p =
+                        joint::predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
+                    d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
+                    o += p.pixels as f64;
+                }
+                errs.push((d / o.max(1.0)).sqrt());
+            }
+            Candidate {
+                extensions: ext.name(),
+                heldout_rel_rmse: errs.iter().sum::<f64>() / errs.len() as f64,
+                converged: ok,
+            }
+        })
+        .collect();
+    let plain = results[0].heldout_rel_rmse;
+    // The best, or the simplest candidate within 1% of the best's error (candidates are listed
+    // simplest first, the single extensions before the pairs).
+    let lowest = results
+        .iter()
+        .filter(|c| c.converged)
+        .map(|c| c.heldout_rel_rmse)
+        .fold(f64::INFINITY, f64::min);
+    let k = results
+        .iter()
+        .position(|c| c.converged && c.heldout_rel_rmse <= 1.01 * lowest)
+        .unwrap_or(0);
+    let best = &results[k];
+    let (chosen, reason) = if k != 0 && best.heldout_rel_rmse < 0.98 * plain {
+        (
+            candidates[k],
+            format!(
+                "held-out error {:.4} against {:.4} for the plain model",
+                best.heldout_rel_rmse, plain
+            ),
+        )
+    } else {
+        (
+            Extensions::default(),
+            format!(
+                "no extension lowers the held-out error by 2% (plain {:.4}, best {:.4} for {})",
+                plain, best.heldout_rel_rmse, best.extensions
+            ),
+        )
+    };
+    let mc = ModelChoice {
+        candidates: results,
+        chosen: chosen.name(),
+        reason,
+    };
+    (mc, chosen)
+}

@@ -1,0 +1,270 @@
+//! What a solve starts from: the session checked, detections reused or run, the photos decoded
+//! and sampled; and whether an earlier fit.json can stand for this run.
+
+use super::*;
+
+/// Everything loaded before fitting.
+pub struct Loaded {
+    pub report: SessionReport,
+    pub detections: Detections,
+    pub detections_path: PathBuf,
+    pub proj: Projection,
+    pub spheres: Vec<SphereData>,
+    pub light: Option<Vector3<f64>>,
+    /// The detector's standard error of the light (radians).
+    pub light_std: Option<f64>,
+    /// Under `"light": "per-image"`: each photo's rotation onto the common light frame.
+    pub frames: Option<Vec<nalgebra::Rotation3<f64>>>,
+    pub highlight_radius: Option<f64>,
+    pub alpha: Option<f64>,
+    /// No photo gave a dark floor (lit surroundings, none in session.json) and all share one
+    /// exposure: the floor is fitted with the material ([`Setup::floor`]).
+    pub fit_floor: bool,
+    pub skipped: Vec<String>,
+    pub timings: Timings,
+}
+
+fn mtime(p: &Path) -> Option<SystemTime> {
+    std::fs::metadata(p).and_then(|m| m.modified()).ok()
+}
+
+/// The files a session's results depend on: session.json, the photos, the intrinsics.
+fn inputs(report: &SessionReport) -> Vec<PathBuf> {
+    let mut v = vec![report.session_file.clone()];
+    v.extend(report.images.iter().map(|i| i.path.clone()));
+    v.extend(report.intrinsics_file.clone());
+    v
+}
+
+/// Whether `detections.json` can be reused: newer than every input, same schema, same photos.
+fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detections, String> {
+    let Some(t) = mtime(path) else {
+        return Err("no detections.json yet".into());
+    };
+    for p in &inputs(report) {
+        match mtime(p) {
+            Some(m) if m < t => {}
+            _ => {
+                return Err(format!(
+                    "{} is newer than detections.json",
+                    p.file_name().unwrap_or_default().to_string_lossy()
+                ))
+            }
+        }
+    }
+    let d: Detections = crate::formats::output::read_json(path).map_err(|e| e.to_string())?;
+    if d.schema != detections::SCHEMA {
+        return Err(format!("detections.json has schema {:?}", d.schema));
+    }
+    let same = d.images.len() == report.images.len()
+        && d.images.iter().zip(&report.images).all(|(a, b)| {
+            a.file == b.file
+                && a.spheres.len() == b.radii_mm.len()
+                && a.spheres
+                    .iter()
+                    .zip(&b.radii_mm)
+                    .all(|(s, r)| s.radius_mm == *r)
+        });
+    let proj = if report.camera.is_some() {
+        "perspective"
+    } else {
+        "orthographic"
+    };
+    if !same || d.projection != proj {
+        return Err("detections.json describes other photos or another camera".into());
+    }
+    Ok(d)
+}
+
+/// Check the session, reuse or run detection, decode and sample.
+pub fn load(opts: &Options) -> Result<Loaded> {
+    let t0 = Instant::now();
+    load_inspected(opts, session::inspect(&opts.session)?, t0)
+}
+
+/// [`load`] for a session already inspected (at `t0`).
+pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<Loaded> {
+    let (sess, _) = Session::load(&report.session_file)?;
+    let mut timings = Timings {
+        inspect_s: t0.elapsed().as_secs_f64(),
+        ..Timings::default()
+    };
+    let mut skipped = vec![];
+    let proj = match &report.camera {
+        Some(c) => {
+            skipped.push(format!(
+                "calibration: camera from {} (not recalibrated)",
+                report
+                    .intrinsics_file
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            ));
+            Projection::Perspective(*c)
+        }
+        None => {
+            skipped.push("calibration: no intrinsics in session.json, orthographic camera".into());
+            Projection::Orthographic
+        }
+    };
+    let detections_path = report.session_file.with_file_name("detections.json");
+    let t1 = Instant::now();
+    let reuse = if opts.redetect {
+        Err("--redetect".to_string())
+    } else {
+        reusable(&detections_path, &report)
+    };
+    let detections = match reuse {
+        Ok(d) => {
+            skipped.push("detection: detections.json reused (newer than its inputs)".into());
+            d
+        }
+        Err(why) => {
+            let d = detect::run(&detect::Options {
+                session: report.session_file.clone(),
+                out: None,
+                overlays: true,
+                quiet: opts.quiet,
+            })?;
+            skipped.push(format!("detection: ran ({why})"));
+            d
+        }
+    };
+    timings.detect_s = t1.elapsed().as_secs_f64();
+    // One light per photo: each photo is turned so that its light (from its own highlights)
+    // lies on the first photo's, the material is fitted in that common frame, and the light's
+    // prior is the photos' lights combined (`observe::light_frames`).
+    let (light, light_std, frames) = match sess.light {
+        LightMode::Shared => (
+            detections.light_direction.map(Vector3::from),
+            detections.light_std_deg.map(f64::to_radians),
+            None,
+        ),
+        LightMode::PerImage => {
+            let mut lights = vec![];
+            let mut info = 0.0;
+            for im in &detections.images {
+                let (Some(l), Some(sd)) = (im.light_direction, im.light_std_deg) else {
+                    return Err(Error::invalid(
+                        &report.session_file,
+                        format!(
+                            "\"light\": \"per-image\", but {} has no usable highlight: its light is unknown (detections.json says why)",
+                            im.file
+                        ),
+                    ));
+                };
+                lights.push(Vector3::from(l));
+                info += 1.0 / sd.to_radians().max(detect::LIGHT_FLOOR).powi(2);
+            }
+            let reference = lights[0];
+            let frames = observe::light_frames(&lights, &reference);
+            skipped.push(format!(
+                "light: one per photo ({} photos), each turned onto the first photo's light; the fit refines a correction they share",
+                lights.len()
+            ));
+            (Some(reference), Some(info.powf(-0.5)), Some(frames))
+        }
+    };
+    let hl: Vec<&detections::HighlightJson> = detections
+        .images
+        .iter()
+        .flat_map(|i| i.spheres.iter())
+        .filter_map(|s| s.highlight.as_ref())
+        .filter(|h| !h.outlier)
+        .collect();
+    let highlight_radius = hl
+        .iter()
+        .map(|h| h.radius_deg.to_radians())
+        .fold(None, |a: Option<f64>, r| Some(a.map_or(r, |a| a.max(r))));
+    let mut alphas: Vec<f64> = hl.iter().filter_map(|h| h.alpha).collect();
+    alphas.sort_by(|a, b| a.total_cmp(b));
+    let alpha = alphas.get(alphas.len() / 2).copied();
+    let obs = observe::observe(
+        &report,
+        &sess,
+        &detections,
+        &proj,
+        &match sess.light {
+            LightMode::Shared => vec![light],
+            LightMode::PerImage => detections
+                .images
+                .iter()
+                .map(|i| i.light_direction.map(Vector3::from))
+                .collect(),
+        },
+        highlight_radius,
+        frames.as_deref(),
+    )?;
+    timings.decode_s = obs.decode_s;
+    timings.samples_s = obs.samples_s;
+    if obs.spheres.iter().all(|s| s.obs.is_empty()) {
+        return Err(Error::invalid(
+            &report.session_file,
+            "no usable pixels on any sphere (all saturated or on the edge)",
+        ));
+    }
+    // The floor is fitted when no photo measured it and one floor (in pixel values) is one
+    // constant in radiance units: the same exposure on every photo.
+    let same_exposure = report
+        .images
+        .windows(2)
+        .all(|w| w[0].exposure == w[1].exposure);
+    let fit_floor = obs.spheres.iter().all(|s| s.floor.is_none()) && same_exposure;
+    Ok(Loaded {
+        fit_floor,
+        report,
+        detections,
+        detections_path,
+        proj,
+        spheres: obs.spheres,
+        light,
+        light_std,
+        frames,
+        highlight_radius,
+        alpha,
+        skipped,
+        timings,
+    })
+}
+
+/// The options that decide a fit's result (not where it is written, nor progress display).
+pub fn fingerprint(opts: &Options) -> String {
+    format!(
+        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | baseline {}",
+        env!("CARGO_PKG_VERSION"),
+        opts.method,
+        opts.holdout,
+        opts.eta_prior,
+        opts.irradiance,
+        opts.reduction,
+        opts.robust,
+        opts.extensions,
+        opts.start_sigma0,
+        opts.start_light.map(|l| (l.azimuth, l.elevation)),
+        opts.light_fit.name(),
+        opts.jackknife,
+        opts.entry_transmission,
+        opts.baseline || opts.plots.is_some()
+    )
+}
+
+/// A fit.json that can stand for this run: newer than session.json, the photos, the intrinsics
+/// and detections.json, of this schema, and written with the same options. Not with --redetect
+/// or --plots (figures need the pixels).
+pub(super) fn cached(opts: &Options, report: &SessionReport) -> Option<(FitFile, PathBuf)> {
+    if opts.redetect || opts.plots.is_some() {
+        return None;
+    }
+    let out = opts
+        .out
+        .clone()
+        .unwrap_or_else(|| report.session_file.with_file_name("fit.json"));
+    let t = mtime(&out)?;
+    let mut files = inputs(report);
+    files.push(report.session_file.with_file_name("detections.json"));
+    if !files.iter().all(|p| mtime(p).is_some_and(|m| m < t)) {
+        return None;
+    }
+    let f: FitFile = crate::formats::output::read_json(&out).ok()?;
+    (f.schema == SCHEMA && f.options == fingerprint(opts)).then_some((f, out))
+}

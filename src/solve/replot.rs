@@ -1,0 +1,32 @@
+//! `workbench plot <fit.json>`: a fit's figures redrawn from fit.json and its session.
+
+use crate::error::{Error, Result};
+use crate::formats::fit::FitFile;
+use std::path::{Path, PathBuf};
+
+/// `workbench plot <fit.json>`: redraw a fit's figures from fit.json and its session, without
+/// solving. The session is the one fit.json names (or session.json beside fit.json when that
+/// has moved); detections are reused when up to date.
+pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
+    let fit: FitFile = crate::formats::output::read_json(fit_path)?;
+    fit.validate(fit_path)?;
+    let session = fit.session_path(fit_path)?;
+    let mut opts = super::Options::new(&session);
+    opts.quiet = quiet;
+    let l = super::load(&opts)?;
+    let same = l.spheres.len() == fit.rmse.spheres.len()
+        && l.spheres
+            .iter()
+            .zip(&fit.rmse.spheres)
+            .all(|(a, b)| a.image == b.image && a.index == b.index && a.radius_mm == b.radius_mm);
+    if !same {
+        return Err(Error::invalid(
+            fit_path,
+            format!(
+                "describes other spheres than {} holds now",
+                session.display()
+            ),
+        ));
+    }
+    crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)
+}

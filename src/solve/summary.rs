@@ -1,0 +1,242 @@
+//! The one-screen human summary of a fit.
+
+use super::*;
+
+/// The one-screen human summary of a fit.
+pub fn summary(f: &FitFile) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let status = |name: &str| {
+        f.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.status.clone())
+            .unwrap_or_default()
+    };
+    let rgb = |v: &[f64; 3], e: &[f64; 3], digits: usize| {
+        format!(
+            "{:.d$} ± {:.d$}, {:.d$} ± {:.d$}, {:.d$} ± {:.d$}",
+            v[0],
+            e[0],
+            v[1],
+            e[1],
+            v[2],
+            e[2],
+            d = digits
+        )
+    };
+    let _ = writeln!(
+        s,
+        "method   {} ({} camera), session {}",
+        match f.method {
+            Method::Joint => "joint",
+            Method::Paper => "paper baseline",
+        },
+        f.projection,
+        f.session
+    );
+    let _ = writeln!(
+        s,
+        "sigma0   {} mm (r, g, b)",
+        rgb(&f.sigma0_mm, &f.std.sigma0_mm, 4)
+    );
+    let _ = writeln!(s, "albedo   {}", rgb(&f.albedo, &f.std.albedo, 4));
+    let _ = writeln!(
+        s,
+        "eta      {:.4} ± {:.4}  [{}]",
+        f.eta,
+        f.std.eta,
+        status("eta")
+    );
+    match (&f.specular, &f.std.specular) {
+        (Some(sp), Some(e)) => {
+            let _ = writeln!(
+                s,
+                "specular ks {:.4} ± {:.4} [{}], alpha {:.4} ± {:.4} [{}]",
+                sp.ks,
+                e.ks,
+                status("ks"),
+                sp.alpha,
+                e.alpha,
+                status("alpha")
+            );
+        }
+        _ => {
+            let _ = writeln!(s, "specular none  [{}]", status("ks"));
+        }
+    }
+    let _ = writeln!(
+        s,
+        "light    [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°) ± {:.3}°  [{}]",
+        f.light_direction[0],
+        f.light_direction[1],
+        f.light_direction[2],
+        f.light_azimuth_deg,
+        f.light_elevation_deg,
+        f.std.light_deg,
+        status("light_azimuth")
+    );
+    if let Some(lp) = &f.light_pull {
+        let _ = writeln!(
+            s,
+            "         moved {:.3}° from the detector's light (± {:.4}°): pull {:.1}",
+            lp.moved_deg, lp.detector_std_deg, lp.pull
+        );
+    }
+    for il in &f.image_lights {
+        let _ = writeln!(
+            s,
+            "light    {:<12} [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°)",
+            il.file,
+            il.direction[0],
+            il.direction[1],
+            il.direction[2],
+            il.azimuth_deg,
+            il.elevation_deg
+        );
+    }
+    if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
+        let _ = writeln!(
+            s,
+            "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)",
+            f.reference_radius_mm
+        );
+    }
+    if let (Some(k), Some(e)) = (f.kernel, f.std.kernel) {
+        let _ = writeln!(
+            s,
+            "kernel   two Gaussians: weight {:.4} ± {:.4} in a tail {:.3} ± {:.3} times wider",
+            k.weight, e.weight, k.ratio, e.ratio
+        );
+    }
+    if let (Some(b), Some(e)) = (f.albedo_curvature, f.std.albedo_curvature) {
+        let _ = writeln!(
+            s,
+            "extension albedo_curvature b = {b:.4} ± {e:.4} (r_ref {} mm)",
+            f.reference_radius_mm
+        );
+    }
+    if let Some(pr) = &f.per_radius {
+        for r in pr {
+            let _ = writeln!(
+                s,
+                "radius   {:>6} mm: σ {:.4}, {:.4}, {:.4} rad → σ0 {:.3}, {:.3}, {:.3} mm",
+                r.radius_mm,
+                r.sigma_rad[0],
+                r.sigma_rad[1],
+                r.sigma_rad[2],
+                r.sigma0_mm[0],
+                r.sigma0_mm[1],
+                r.sigma0_mm[2]
+            );
+        }
+    }
+    if let Some(b) = &f.baseline {
+        let _ = writeln!(
+            s,
+            "baseline paper's method: σ0 {:.4}, {:.4}, {:.4} mm (detector's light, η = {} divided out, peak masked; {:.2} s)",
+            b.sigma0_mm[0], b.sigma0_mm[1], b.sigma0_mm[2], b.eta, b.seconds
+        );
+    }
+    let _ = writeln!(
+        s,
+        "rmse     {:.3e} ({:.2}% of the data's RMS){}",
+        f.rmse.overall,
+        100.0 * f.rmse.relative,
+        f.convergence
+            .chi2_per_dof
+            .map(|c| format!(", {:.2}× the measured noise (χ²/dof {c:.2})", c.sqrt()))
+            .unwrap_or_default()
+    );
+    for sp in &f.rmse.spheres {
+        let _ = writeln!(
+            s,
+            "sphere   {:<12} #{} r {:>5} mm: {:>8} px, rel. RMSE {:.2}% (lit {:.2}%, unlit {:.2}%){}",
+            sp.image,
+            sp.index + 1,
+            sp.radius_mm,
+            sp.pixels,
+            100.0 * sp.rel_rmse,
+            100.0 * sp.lit_rel_rmse,
+            100.0 * sp.unlit_rel_rmse,
+            if sp.held_out { "  HELD OUT" } else { "" }
+        );
+    }
+    if let Some(j) = &f.jackknife {
+        let per: Vec<String> = j
+            .heldout
+            .iter()
+            .map(|h| format!("{} mm {:.2}%", h.radius_mm, 100.0 * h.rel_rmse))
+            .collect();
+        let _ = writeln!(
+            s,
+            "jackknife each radius left out and predicted: {} (mean {:.2}%); std = {}",
+            per.join(", "),
+            100.0 * j.heldout_rel_rmse,
+            f.std_source
+        );
+    }
+    if let Some(h) = &f.holdout {
+        let _ = writeln!(
+            s,
+            "holdout  r {} mm predicted with rel. RMSE {:.2}% (lit {:.2}%, unlit {:.2}%)",
+            h.radius_mm,
+            100.0 * h.rel_rmse,
+            100.0 * h.lit_rel_rmse,
+            100.0 * h.unlit_rel_rmse
+        );
+    }
+    let c = &f.convergence;
+    let evals: usize = c.stages.iter().map(|st| st.evaluations).sum();
+    let _ = writeln!(
+        s,
+        "solver   {} ({} stages, {} evaluations{}){}",
+        if c.converged {
+            "converged"
+        } else {
+            "DID NOT CONVERGE"
+        },
+        c.stages.len(),
+        evals,
+        c.robust_loss
+            .as_ref()
+            .map(|r| format!(", {r}, {} residuals down-weighted", c.downweighted))
+            .unwrap_or_default(),
+        c.stages
+            .last()
+            .map(|st| format!(": {}", st.termination))
+            .unwrap_or_default()
+    );
+    for k in &f.skipped {
+        let _ = writeln!(s, "skipped  {k}");
+    }
+    for n in &f.notes {
+        let _ = writeln!(s, "note     {n}");
+    }
+    let t = &f.timings;
+    let _ = writeln!(
+        s,
+        "time     {:.2} s: detect {:.2}, decode {:.2}, samples {:.2}, solve {:.2}{}{}{}",
+        t.total_s,
+        t.detect_s,
+        t.decode_s,
+        t.samples_s,
+        t.solve_s,
+        if t.model_choice_s > 0.0 {
+            format!(", model choice {:.2}", t.model_choice_s)
+        } else {
+            String::new()
+        },
+        if t.jackknife_s > 0.0 {
+            format!(", jackknife {:.2}", t.jackknife_s)
+        } else {
+            String::new()
+        },
+        if t.holdout_s > 0.0 {
+            format!(", predictions {:.2}", t.holdout_s)
+        } else {
+            String::new()
+        }
+    );
+    s
+}
