@@ -332,17 +332,13 @@ pub fn diffuse_start(
     (s0, a0)
 }
 
-/// Fit the joint model to the given spheres.
+/// Fit the joint model to the given spheres, in its phases: the light's prior, the diffuse stage,
+/// the lobe's start, the parameter set, the reduction level, the full fit with what the data do
+/// not determine held, and the checks on its result.
 pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let model = setup.model;
     let mut notes = vec![];
     let mut status: [String; N_PARAMS] = std::array::from_fn(|_| "fitted".to_string());
-    let distinct_radii = {
-        let mut r: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
-        r.sort_by(|a, b| a.total_cmp(b));
-        r.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-        r.len()
-    };
     let highlight = setup.light.is_some() && setup.highlight_radius.is_some();
     // Start light.
     let light0 = setup
@@ -373,7 +369,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let start_light = setup
         .start_light
         .unwrap_or_else(|| LightAngles::from_direction(&light0));
-    let (eta_mean, eta_std) = setup.eta_prior;
+    let (eta_mean, _) = setup.eta_prior;
     let (s0, a0) = if setup.warm.is_some() {
         ([1.0; 3], [1.0; 3])
     } else {
@@ -390,48 +386,213 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let hold_light = setup.light_fit == LightFit::Hold;
     free[idx::AZIMUTH] = !hold_light;
     free[idx::ELEVATION] = !hold_light;
-    // The detector's light as a prior on the two angles: isotropic with the detector's standard
-    // error (floored), so the azimuth's is that over cos(elevation).
-    let detector = setup.light.map(|l| LightAngles::from_direction(&l));
-    let light_prior_std = match (setup.light_fit, detector, setup.light_std) {
-        (LightFit::Prior, Some(_), Some(s)) if s.is_finite() => Some(s.max(LIGHT_PRIOR_FLOOR)),
-        _ => None,
-    };
-    let light_priors: Vec<Prior> = match (light_prior_std, detector) {
-        (Some(s), Some(d)) => vec![
-            Prior {
-                index: idx::AZIMUTH,
-                mean: d.azimuth,
-                std: s / d.elevation.cos().abs().max(1e-3),
-            },
-            Prior {
-                index: idx::ELEVATION,
-                mean: d.elevation,
-                std: s,
-            },
-        ],
-        _ => vec![],
-    };
-    if let Some(s) = light_prior_std {
-        let what = format!("prior: the detector's ± {:.4}°", s.to_degrees());
-        status[idx::AZIMUTH] = what.clone();
-        status[idx::ELEVATION] = what;
-    }
-    if hold_light {
-        let why = if setup.start_light.is_some() {
-            "fixed: as given"
-        } else if setup.light.is_some() {
-            "fixed: from the detector"
-        } else {
-            "fixed: from the shading"
-        };
-        status[idx::AZIMUTH] = why.into();
-        status[idx::ELEVATION] = why.into();
-    }
-    let mut downweighted = 0;
+    let light = LightPrior::of(setup, &mut status);
     if let Some(w) = setup.warm {
         p = w;
     }
+    diffuse_stage(
+        setup,
+        &mut pooled,
+        &pool,
+        (&mut p, free),
+        &light.priors,
+        &mut stages,
+        &mut notes,
+    );
+    lap("diffuse stage", &mut phases);
+    let mut specular = specular_start(setup, &pooled, highlight, &mut p, &mut status, &mut notes);
+    let mut priors = parameter_set(
+        setup,
+        spheres,
+        specular,
+        &light.priors,
+        (&mut p, &mut free),
+        &mut status,
+        &mut notes,
+    );
+    lap("specular start", &mut phases);
+    let (final_obs, chosen, levels) =
+        choose_reduction(setup.reduction, &pooled, spheres, &model, &p, free);
+    if chosen.width_deg == 0.0 && setup.reduction == Reduction::Auto {
+        notes.push(format!(
+            "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std or its tolerance: every pixel used"
+        ));
+    }
+    lap("reduction choice", &mut phases);
+    // Full fit, then identifiability.
+    let (fit, downweighted) = fit_identified(
+        setup,
+        &final_obs,
+        (&mut p, &mut free),
+        &mut priors,
+        &mut specular,
+        &mut status,
+        &mut stages,
+        &mut notes,
+    );
+    resolution_notes(
+        setup,
+        spheres,
+        &final_obs,
+        &fit,
+        &priors,
+        &mut status,
+        &mut notes,
+    );
+    let (clipped, on) = spheres
+        .iter()
+        .fold((0, 0), |(c, n), s| (c + s.saturated, n + s.pixels));
+    if on > 0 && clipped as f64 > CLIPPED_WARN * on as f64 {
+        notes.push(format!(
+            "{:.0}% of the sphere pixels are clipped: the fit rests on the rest (near the terminator), where σ0, the albedo and the light trade off — expect biases of several percent; lower the exposure",
+            100.0 * clipped as f64 / on as f64
+        ));
+    }
+    let fit = degenerate_check(fit, &mut stages, &mut notes);
+    let (chi2, quality) = fit_notes(&fit, spheres, setup.eta_prior, &status[idx::ETA]);
+    notes.extend(quality);
+    let light_pull = light.pull(setup, &fit, free[idx::AZIMUTH], &mut notes);
+    for k in 0..N_PARAMS {
+        if !free[k] && status[k] == "fitted" {
+            status[k] = "fixed".into();
+        }
+    }
+    let mut tension = [1.0; N_PARAMS];
+    for q in priors.iter().filter(|q| fit.free[q.index]) {
+        tension[q.index] = prior_tension(fit.params.to_vec()[q.index], fit.std[q.index], q);
+    }
+    let eta_systematic = eta_from_highlight(setup, &pooled, specular, &fit, &mut notes);
+    lap("joint stage", &mut phases);
+    // Each note once (the identifiability rounds repeat theirs).
+    let mut seen = std::collections::HashSet::new();
+    notes.retain(|n| seen.insert(n.clone()));
+    JointFit {
+        phases,
+        fit,
+        model,
+        stages,
+        levels,
+        chosen,
+        pixels: pooled.pixels,
+        downweighted,
+        notes,
+        status,
+        specular,
+        light_pull,
+        prior_tension: tension,
+        eta_systematic,
+        chi2_dof: chi2,
+    }
+}
+
+/// The detector's light as a prior on the light's two angles (none when it is held or free).
+struct LightPrior {
+    detector: Option<LightAngles>,
+    /// The prior's width (radians).
+    std: Option<f64>,
+    priors: Vec<Prior>,
+}
+
+impl LightPrior {
+    fn of(setup: &Setup, status: &mut [String; N_PARAMS]) -> LightPrior {
+        let hold_light = setup.light_fit == LightFit::Hold;
+        // The detector's light as a prior on the two angles: isotropic with the detector's standard
+        // error (floored), so the azimuth's is that over cos(elevation).
+        let detector = setup.light.map(|l| LightAngles::from_direction(&l));
+        let light_prior_std = match (setup.light_fit, detector, setup.light_std) {
+            (LightFit::Prior, Some(_), Some(s)) if s.is_finite() => Some(s.max(LIGHT_PRIOR_FLOOR)),
+            _ => None,
+        };
+        let light_priors: Vec<Prior> = match (light_prior_std, detector) {
+            (Some(s), Some(d)) => vec![
+                Prior {
+                    index: idx::AZIMUTH,
+                    mean: d.azimuth,
+                    std: s / d.elevation.cos().abs().max(1e-3),
+                },
+                Prior {
+                    index: idx::ELEVATION,
+                    mean: d.elevation,
+                    std: s,
+                },
+            ],
+            _ => vec![],
+        };
+        if let Some(s) = light_prior_std {
+            let what = format!("prior: the detector's ± {:.4}°", s.to_degrees());
+            status[idx::AZIMUTH] = what.clone();
+            status[idx::ELEVATION] = what;
+        }
+        if hold_light {
+            let why = if setup.start_light.is_some() {
+                "fixed: as given"
+            } else if setup.light.is_some() {
+                "fixed: from the detector"
+            } else {
+                "fixed: from the shading"
+            };
+            status[idx::AZIMUTH] = why.into();
+            status[idx::ELEVATION] = why.into();
+        }
+        LightPrior {
+            detector,
+            std: light_prior_std,
+            priors: light_priors,
+        }
+    }
+
+    /// How far the shading pulled the light from the detector's, in the detector's errors.
+    fn pull(
+        &self,
+        setup: &Setup,
+        fit: &Fit,
+        light_free: bool,
+        notes: &mut Vec<String>,
+    ) -> Option<LightPull> {
+        let (detector, light_prior_std) = (self.detector, self.std);
+        let light_pull = match (detector, setup.light_std) {
+            (Some(d), Some(s)) if light_free && s > 0.0 => {
+                let moved = fit.params.light.direction().angle(&d.direction());
+                Some(LightPull {
+                    moved_deg: moved.to_degrees(),
+                    detector_std_deg: s.to_degrees(),
+                    prior_std_deg: light_prior_std.map(f64::to_degrees),
+                    pull: moved / light_prior_std.unwrap_or(s),
+                })
+            }
+            _ => None,
+        };
+        if let Some(lp) = &light_pull {
+            if lp.pull > PULL_WARN {
+                notes.push(format!(
+                    "the shading pulls the light {:.3}° from the highlights' estimate ({:.1} times its ± {:.4}°): the model does not describe the shading fully{}",
+                    lp.moved_deg,
+                    lp.pull,
+                    lp.prior_std_deg.unwrap_or(lp.detector_std_deg),
+                    if light_prior_std.is_some() {
+                        ""
+                    } else {
+                        "; σ0 moves with the light — without --free-light the detector's light is a prior"
+                    }
+                ));
+            }
+        }
+        light_pull
+    }
+}
+
+/// The diffuse stage: the material and the light on 2° cells with the highlight left out; the
+/// cells pooled again around a light that moved more than 2° (none with a warm start).
+fn diffuse_stage(
+    setup: &Setup,
+    pooled: &mut Pooled,
+    pool: &dyn Fn(Vector3<f64>) -> Pooled,
+    (p, free): (&mut Params, [bool; N_PARAMS]),
+    light_priors: &[Prior],
+    stages: &mut Vec<Stage>,
+    notes: &mut Vec<String>,
+) {
+    let model = setup.model;
     for round in 0..if setup.warm.is_some() { 0 } else { 2 } {
         let t = std::time::Instant::now();
         let cells = pooled.merged(8);
@@ -439,9 +600,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         let (f, _, _) = solver::fit_robust(
             model,
             &obs,
-            &p,
+            &*p,
             free,
-            &light_priors,
+            light_priors,
             setup.floor,
             HUBER_K,
             4,
@@ -453,28 +614,39 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             t,
         ));
         let moved = f.params.light.direction().angle(&pooled.light);
-        p = f.params;
+        *p = f.params;
         // Cells follow the light: pool again around a light that moved by more than 2°.
         if moved > 2f64.to_radians() && round == 0 {
             notes.push(format!(
                 "the light moved {:.1}° from its start in the diffuse fit: pixels pooled again around it",
                 moved.to_degrees()
             ));
-            pooled = pool(p.light.direction());
+            *pooled = pool(p.light.direction());
         } else {
             break;
         }
     }
-    lap("diffuse stage", &mut phases);
-    // Specular start.
-    let mut specular = highlight && !pooled.kept.is_empty();
+}
+
+/// The lobe's start: ks from the highlight's pixels less the diffuse fit (or the irradiance
+/// given); without a usable highlight the lobe is off. Returns whether it is on.
+fn specular_start(
+    setup: &Setup,
+    pooled: &Pooled,
+    highlight: bool,
+    p: &mut Params,
+    status: &mut [String; N_PARAMS],
+    notes: &mut Vec<String>,
+) -> bool {
+    let model = setup.model;
+    let specular = highlight && !pooled.kept.is_empty();
     if specular && setup.warm.is_none() {
-        let mut unit = p;
+        let mut unit = *p;
         unit.material.albedo = [0.0; 3];
         unit.material.specular.ks = 1.0;
         let (mut num, mut den) = (0.0, 0.0);
         for o in &pooled.kept {
-            let d = model.radiance(&p, &o.geometry);
+            let d = model.radiance(p, &o.geometry);
             let s = model.radiance(&unit, &o.geometry);
             for c in 0..3 {
                 let w2 = o.weight[c] * o.weight[c];
@@ -496,8 +668,28 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         status[idx::ALPHA] = status[idx::KS].clone();
         notes.push("no usable highlight: specular lobe off (ks = 0)".into());
     }
-    // The final parameter set.
-    let mut priors: Vec<Prior> = light_priors.clone();
+    specular
+}
+
+/// The parameters of the full fit and their priors: the lobe, η (on its prior unless the
+/// irradiance is given), the extensions asked for (3 radii at least), the kernel's start.
+fn parameter_set(
+    setup: &Setup,
+    spheres: &[&SphereData],
+    specular: bool,
+    light_priors: &[Prior],
+    (p, free): (&mut Params, &mut [bool; N_PARAMS]),
+    status: &mut [String; N_PARAMS],
+    notes: &mut Vec<String>,
+) -> Vec<Prior> {
+    let (eta_mean, eta_std) = setup.eta_prior;
+    let distinct_radii = {
+        let mut r: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+        r.sort_by(|a, b| a.total_cmp(b));
+        r.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        r.len()
+    };
+    let mut priors: Vec<Prior> = light_priors.to_vec();
     free[idx::KS] = specular && setup.irradiance.is_none();
     free[idx::ALPHA] = specular;
     free[idx::ETA] = true;
@@ -556,33 +748,42 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             status[k] = "off".into();
         }
     }
-    // Reduction level.
-    lap("specular start", &mut phases);
-    let (final_obs, chosen, levels) =
-        choose_reduction(setup.reduction, &pooled, spheres, &model, &p, free);
-    if chosen.width_deg == 0.0 && setup.reduction == Reduction::Auto {
-        notes.push(format!(
-            "no reduction level keeps the predicted shift below {SHIFT_LIMIT} std or its tolerance: every pixel used"
-        ));
-    }
-    lap("reduction choice", &mut phases);
-    // Full fit, then identifiability.
+    priors
+}
+
+/// The full fit, repeated (at most twice more) with what the data do not determine held: η at
+/// its prior, α held, the lobe or an extension off. Returns the fit and the residuals the Huber
+/// loss down-weighted.
+#[allow(clippy::too_many_arguments)]
+fn fit_identified(
+    setup: &Setup,
+    final_obs: &[Obs],
+    (p, free): (&mut Params, &mut [bool; N_PARAMS]),
+    priors: &mut Vec<Prior>,
+    specular: &mut bool,
+    status: &mut [String; N_PARAMS],
+    stages: &mut Vec<Stage>,
+    notes: &mut Vec<String>,
+) -> (Fit, usize) {
+    let model = setup.model;
+    let (eta_mean, eta_std) = setup.eta_prior;
+    let mut downweighted = 0;
     let mut fit = None;
     for attempt in 0..3 {
         let t = std::time::Instant::now();
         let (f, _, down) = if setup.robust {
             solver::fit_robust(
                 model,
-                &final_obs,
-                &p,
-                free,
-                &priors,
+                final_obs,
+                &*p,
+                *free,
+                priors,
                 setup.floor,
                 HUBER_K,
                 6,
             )
         } else {
-            let f = solver::fit_with_floor(model, &final_obs, &p, free, &priors, setup.floor);
+            let f = solver::fit_with_floor(model, final_obs, p, *free, priors, setup.floor);
             (f, vec![], 0)
         };
         downweighted = down;
@@ -630,7 +831,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
                     free[idx::KS] = false;
                     free[idx::ALPHA] = false;
                     p.material.specular.ks = 0.0;
-                    specular = false;
+                    *specular = false;
                     status[idx::KS] = format!("off: not determined (free fit: ± {:.3})", f.std[k]);
                     status[idx::ALPHA] = "off".into();
                     notes.push("the specular scale is not determined: lobe off".into());
@@ -684,27 +885,39 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             break;
         }
         // Keep what was fitted for the rest as the next start.
-        let held = p;
-        p = f.params;
+        let held = *p;
+        *p = f.params;
         for k in 0..N_PARAMS {
             if !free[k] {
                 let mut v = p.to_vec();
                 v[k] = held.to_vec()[k];
-                p = Params::from_vec(&v);
+                *p = Params::from_vec(&v);
             }
         }
     }
-    let fit = fit.expect("the loop ends with a fit");
-    // σ0 at the edges of what the data resolve, where the linearised standard error means
-    // nothing: compare with σ0 → 0 or → ∞ (profile likelihood).
+    (fit.expect("the loop ends with a fit"), downweighted)
+}
+
+/// σ0 at the edges of what the data resolve, where the linearised standard error means nothing:
+/// compared with σ0 → 0 or → ∞ (profile likelihood), and below a pixel's angle; each such σ0's
+/// status says it is a bound.
+fn resolution_notes(
+    setup: &Setup,
+    spheres: &[&SphereData],
+    final_obs: &[Obs],
+    fit: &Fit,
+    priors: &[Prior],
+    status: &mut [String; N_PARAMS],
+    notes: &mut Vec<String>,
+) {
     let (r_min, r_max) = spheres.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
         (a.min(s.radius_mm), b.max(s.radius_mm))
     });
     let mut limits = resolution_limits(
-        model,
-        &final_obs,
-        &fit,
-        &priors,
+        setup.model,
+        final_obs,
+        fit,
+        priors,
         setup.floor,
         (r_min, r_max),
     );
@@ -743,17 +956,11 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             PARAM_NAMES[idx::SIGMA0 + c]
         ));
     }
-    let (clipped, on) = spheres
-        .iter()
-        .fold((0, 0), |(c, n), s| (c + s.saturated, n + s.pixels));
-    if on > 0 && clipped as f64 > CLIPPED_WARN * on as f64 {
-        notes.push(format!(
-            "{:.0}% of the sphere pixels are clipped: the fit rests on the rest (near the terminator), where σ0, the albedo and the light trade off — expect biases of several percent; lower the exposure",
-            100.0 * clipped as f64 / on as f64
-        ));
-    }
-    // A fit whose core parameters have no finite standard error is degenerate, whatever the
-    // optimiser's stopping test said: not a measurement.
+}
+
+/// A fit whose core parameters have no finite standard error is degenerate, whatever the
+/// optimiser's stopping test said: not a measurement.
+fn degenerate_check(fit: Fit, stages: &mut [Stage], notes: &mut Vec<String>) -> Fit {
     let mut fit = fit;
     let core = (0..6).chain([idx::AZIMUTH, idx::ELEVATION]);
     let singular: Vec<&str> = core
@@ -775,49 +982,21 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             singular.join(", ")
         ));
     }
-    let (chi2, quality) = fit_notes(&fit, spheres, setup.eta_prior, &status[idx::ETA]);
-    notes.extend(quality);
-    // How far the shading pulled the light from the detector's, in the detector's errors.
-    let light_pull = match (detector, setup.light_std) {
-        (Some(d), Some(s)) if free[idx::AZIMUTH] && s > 0.0 => {
-            let moved = fit.params.light.direction().angle(&d.direction());
-            Some(LightPull {
-                moved_deg: moved.to_degrees(),
-                detector_std_deg: s.to_degrees(),
-                prior_std_deg: light_prior_std.map(f64::to_degrees),
-                pull: moved / light_prior_std.unwrap_or(s),
-            })
-        }
-        _ => None,
-    };
-    if let Some(lp) = &light_pull {
-        if lp.pull > PULL_WARN {
-            notes.push(format!(
-                "the shading pulls the light {:.3}° from the highlights' estimate ({:.1} times its ± {:.4}°): the model does not describe the shading fully{}",
-                lp.moved_deg,
-                lp.pull,
-                lp.prior_std_deg.unwrap_or(lp.detector_std_deg),
-                if light_prior_std.is_some() {
-                    ""
-                } else {
-                    "; σ0 moves with the light — without --free-light the detector's light is a prior"
-                }
-            ));
-        }
-    }
-    for k in 0..N_PARAMS {
-        if !free[k] && status[k] == "fitted" {
-            status[k] = "fixed".into();
-        }
-    }
-    let mut tension = [1.0; N_PARAMS];
-    for q in priors.iter().filter(|q| fit.free[q.index]) {
-        tension[q.index] = prior_tension(fit.params.to_vec()[q.index], fit.std[q.index], q);
-    }
-    // With the irradiance given, η is measured by the highlight's height — and, through the
-    // transmissions, by the diffuse shading, the least exact part of the model. Refit η (and α)
-    // on the highlight's pixels alone, the rest held: a disagreement beyond the two formal errors
-    // is flagged and joins η's error as a systematic (docs/uncertainty.md, "η").
+    fit
+}
+
+/// With the irradiance given, η is measured by the highlight's height — and, through the
+/// transmissions, by the diffuse shading, the least exact part of the model. η (and α) refitted
+/// on the highlight's pixels alone, the rest held: a disagreement beyond the two formal errors is
+/// flagged and returned, to join η's error as a systematic (docs/uncertainty.md, "η").
+fn eta_from_highlight(
+    setup: &Setup,
+    pooled: &Pooled,
+    specular: bool,
+    fit: &Fit,
+    notes: &mut Vec<String>,
+) -> f64 {
+    let model = setup.model;
     let mut eta_systematic = 0.0;
     if setup.irradiance.is_some() && specular && fit.free[idx::ETA] && pooled.kept.len() > 8 {
         let mut hl_free = [false; N_PARAMS];
@@ -836,27 +1015,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             ));
         }
     }
-    lap("joint stage", &mut phases);
-    // Each note once (the identifiability rounds repeat theirs).
-    let mut seen = std::collections::HashSet::new();
-    notes.retain(|n| seen.insert(n.clone()));
-    JointFit {
-        phases,
-        fit,
-        model,
-        stages,
-        levels,
-        chosen,
-        pixels: pooled.pixels,
-        downweighted,
-        notes,
-        status,
-        specular,
-        light_pull,
-        prior_tension: tension,
-        eta_systematic,
-        chi2_dof: chi2,
-    }
+    eta_systematic
 }
 
 /// What the fit's residuals and geometry say about it: the residuals against the measured noise
