@@ -15,6 +15,7 @@ pub mod error;
 pub mod figures;
 pub mod fit;
 pub mod formats;
+pub mod lm;
 pub mod model;
 pub mod plot;
 pub mod progress;

@@ -218,12 +218,17 @@ impl Fit {
 /// Solution of [`solve`]: parameters, residuals, linear terms, Jacobian.
 type Solution = (Vector3<f64>, DVector<f64>, SVector<f64, NLIN>, DMatrix<f64>);
 
-/// Levenberg–Marquardt over (light angles, log α) with a finite-difference Jacobian of the
-/// variable-projection residual. Returns the solution, its residual, linear terms and Jacobian.
+/// Levenberg–Marquardt ([`crate::lm`]) over (light angles, log α) with a finite-difference
+/// Jacobian of the variable-projection residual. Returns the solution, its residual, linear terms and Jacobian.
 fn solve(fit: &Fit, pix: &[Px], mut x: Vector3<f64>) -> Option<Solution> {
     let (mut r, mut c) = fit.residuals(pix, &x)?;
     let mut cost = r.norm_squared();
-    let mut lambda = 1e-3;
+    let mut lm = crate::lm::Lm {
+        lambda: 1e-3,
+        lambda_min: 1e-12,
+        tries: 12,
+        tiny: 1e-300,
+    };
     let jac = |x: &Vector3<f64>| -> Option<DMatrix<f64>> {
         let mut j = DMatrix::zeros(pix.len(), 3);
         for k in 0..3 {
@@ -238,48 +243,29 @@ fn solve(fit: &Fit, pix: &[Px], mut x: Vector3<f64>) -> Option<Solution> {
     };
     let mut j = jac(&x)?;
     for _ in 0..60 {
-        let jtj = j.transpose() * &j;
-        let jtr = j.transpose() * &r;
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut m = jtj.clone();
-            for d in 0..3 {
-                m[(d, d)] *= 1.0 + lambda;
-                m[(d, d)] += 1e-300;
-            }
-            let Some(step) = m.try_inverse().map(|mi| -(mi * &jtr)) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let mut step = Vector3::new(step[0], step[1], step[2]);
+        let jtj: Matrix3<f64> = (j.transpose() * &j).fixed_view::<3, 3>(0, 0).into();
+        let jtr: Vector3<f64> = (j.transpose() * &r).fixed_view::<3, 1>(0, 0).into();
+        let accepted = lm.step(&jtj, &jtr, cost, |step| {
             // Keep steps modest: 5° in angle, a factor e^0.5 in α.
             let lim = Vector3::new(0.087, 0.087, 0.5);
-            for k in 0..3 {
-                step[k] = step[k].clamp(-lim[k], lim[k]);
-            }
+            let step = Vector3::from_fn(|k, _| step[k].clamp(-lim[k], lim[k]));
             let xt = x + step;
             if !(xt.z > (1e-3f64).ln() && xt.z < MAX_ALPHA.ln())
                 || (fit.light(&xt) - fit.anchor).norm() > 0.35
             {
-                lambda *= 10.0;
-                continue;
+                return None;
             }
-            if let Some((rt, ct)) = fit.residuals(pix, &xt) {
-                let ctost = rt.norm_squared();
-                if ctost < cost {
-                    let small = step.norm() < 1e-9;
-                    x = xt;
-                    r = rt;
-                    c = ct;
-                    cost = ctost;
-                    lambda = (lambda * 0.3).max(1e-12);
-                    accepted = !small;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !accepted {
+            let (rt, ct) = fit.residuals(pix, &xt)?;
+            Some((rt.norm_squared(), (xt, rt, ct, step.norm() < 1e-9)))
+        });
+        let Some((c2, (xt, rt, ct, small))) = accepted else {
+            break;
+        };
+        x = xt;
+        r = rt;
+        c = ct;
+        cost = c2;
+        if small {
             break;
         }
         j = jac(&x)?;
@@ -686,7 +672,7 @@ impl Combined {
 
 /// The least error the spheres of a session share (radians): on the project's own renders the
 /// combined light lies 0.01–0.05° from the truth with formal errors of 0.012–0.016° (black, grey
-/// card, table; docs/measured.md), the same sign on every sphere, so averaging does not remove it.
+/// card, table; docs/measurements.md), the same sign on every sphere, so averaging does not remove it.
 pub const SHARED_FLOOR: f64 = 0.03 * std::f64::consts::PI / 180.0;
 
 /// Combine highlights' lights ([`combine`]); the trend-model error, shared by every sphere and so

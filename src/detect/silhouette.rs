@@ -11,12 +11,15 @@
 //! 3. Refinement: a threshold or gradient-peak edge is biased on a translucent sphere, because the
 //!    exit transmission darkens the limb (radiance ∝ cos φ near it): the half-level crossing sits
 //!    ~0.4 px inside, the foot ~0.75 px outside. So the outline is refined by fitting the pixels of
-//!    a band around it with an edge model: per angular sector, background b plus, inside the
-//!    silhouette, k0 + k1·cos φ (cos φ = √(1 − s²), see [`crate::camera::outline`]), each pixel
-//!    integrated over 4×4 sub-samples. k0 covers opaque spheres (a step), k1 the translucent
-//!    limb. The per-sector terms are linear and solved in closed form (variable projection);
-//!    Gauss–Newton moves the three outline parameters. Sectors that the model does not explain
-//!    (a terminator crossing the band) are down-weighted by their own residual.
+//!    a band around it with an edge model ([`refine`]): per angular sector and photo, a background
+//!    with a ramp outside the rim and, inside it, a step, cos φ, the exit transmission T(φ) and
+//!    T(φ)·cos φ (cos φ = √(1 − s²), see [`crate::camera::outline`]; opaque spheres need the step
+//!    and cos φ, translucent ones the T terms), each term also varying linearly along the rim
+//!    within its sector; each pixel integrated over 2×2 sub-samples, each spread radially by a
+//!    fitted Gaussian blur (5-point Gauss–Hermite). The per-sector terms are linear and solved in
+//!    closed form (variable projection); Levenberg–Marquardt ([`crate::lm`]) moves the three
+//!    outline parameters and the blur. Sectors that the model does not explain (a terminator
+//!    crossing the band) are down-weighted by their own residual.
 
 use crate::camera::outline::{Outline, Projection};
 use nalgebra::{Matrix3, Vector2, Vector3};
@@ -301,7 +304,7 @@ pub struct Refined {
     pub sectors_used: usize,
     /// Weighted RMS residual of the edge model (image units).
     pub rms: f64,
-    /// 1-σ uncertainty of the outline's centre and radius (px), from the Gauss–Newton covariance.
+    /// 1-σ uncertainty of the outline's centre and radius (px), from σ²(JᵀWJ)⁻¹ at the solution.
     pub std_px: [f64; 3],
     pub iterations: usize,
 }
@@ -366,8 +369,9 @@ fn limb_transmission(u: f64) -> f64 {
     t[i] * (1.0 - f) + t[i + 1] * f
 }
 
-/// Linear features of a band pixel under an outline and blur: coverage, mean cos φ and mean
-/// cos² φ over the pixel's 4×4 sub-samples, each sub-sample spread radially by the blur
+/// Linear features of a band pixel under an outline and blur ([`NBASE`] terms and their linear
+/// variation along the rim): the means of coverage, cos φ, T(φ) and T(φ)·cos φ, and the
+/// background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread radially by the blur
 /// (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial offset δ px as s − δ/R.
 fn features(o: &Outline, p: &BandPixel, r_px: f64, blur: f64) -> Lin {
     let mut f = Lin::zeros();
@@ -583,7 +587,12 @@ pub fn refine(
     let mut x = V4::zeros();
     let (mut res, mut c) = eval(&x);
     let steps = V4::new(0.02 * unit, 0.02 * unit, 0.02 * unit, 0.01);
-    let mut lambda = 1e-3;
+    let mut lm = crate::lm::Lm {
+        lambda: 1e-3,
+        lambda_min: 1e-9,
+        tries: 10,
+        tiny: 1e-30,
+    };
     let mut iterations = 0;
     let mut jtj = M4::zeros();
     for it in 0..25 {
@@ -617,33 +626,23 @@ pub fn refine(
             jtj += wpix[i] * j * j.transpose();
             jtr += wpix[i] * j * res[i];
         }
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut m = jtj;
-            for d in 0..4 {
-                m[(d, d)] *= 1.0 + lambda;
-                m[(d, d)] += 1e-30;
-            }
-            let Some(step) = m.try_inverse().map(|mi| -(mi * jtr)) else {
-                break;
-            };
-            // Never move more than 2 px, nor the blur by more than 1 px², in one step.
+        // Never move more than 2 px, nor the blur by more than 1 px², in one step.
+        let accepted = lm.step(&jtj, &jtr, c, |step| {
             let geo_norm = Vector3::new(step[0], step[1], step[2]).norm();
             let g = (2.0 * unit / geo_norm.max(2.0 * unit)).min(1.0 / step[3].abs().max(1.0));
             let mut trial = x + step * g;
             trial[3] = trial[3].max(0.0);
             let (r2, c2) = eval(&trial);
-            if c2 < c {
-                let small =
-                    (geo_norm * g < 1e-3 * unit && (step[3] * g).abs() < 1e-4) || c - c2 < 1e-7 * c;
-                x = trial;
-                res = r2;
-                c = c2;
-                lambda = (lambda * 0.3).max(1e-9);
-                improved = !small;
-                break;
-            }
-            lambda *= 10.0;
+            let small =
+                (geo_norm * g < 1e-3 * unit && (step[3] * g).abs() < 1e-4) || c - c2 < 1e-7 * c;
+            Some((c2, (trial, r2, small)))
+        });
+        let mut improved = false;
+        if let Some((c2, (trial, r2, small))) = accepted {
+            x = trial;
+            res = r2;
+            c = c2;
+            improved = !small;
         }
         if !improved {
             break;

@@ -700,7 +700,7 @@ fn parameter_set(
             }
         }
         None => {
-            // Without the light's irradiance a free ks absorbs F(η) (notes §4): η rests on its
+            // Without the light's irradiance a free ks absorbs F(η) (docs/pipeline.md, step 6): η rests on its
             // prior, and on the exit transmission T(φ) as far as the data determine it.
             status[idx::ETA] = format!("prior {eta_mean} ± {eta_std}");
             priors.push(Prior {
@@ -1071,7 +1071,7 @@ fn fit_notes(
     (chi2, notes)
 }
 
-/// The reduction level (docs/solve.md, step 4): angular cells first (the highlight pixel by
+/// The reduction level (docs/pipeline.md, step 4): angular cells first (the highlight pixel by
 /// pixel), then the highlight's pixel blocks, each the coarsest whose predicted shift is within
 /// tolerance under `Reduction::Auto`. Returns the observations the joint stage fits, the level
 /// chosen (width 0: every pixel) and the levels tried.

@@ -13,7 +13,7 @@
 //! projection): each channel's residuals and Jacobian rows lose their w-weighted projection on w,
 //! r̃ = r − w (wᵀr)/(wᵀw) and J̃ = J − w (wᵀJ)/(wᵀw). The fit of the other parameters and their
 //! covariance (J̃ᵀJ̃ is the Schur complement of the floor in the full information matrix) are then
-//! those of the fit with the floor free; the floor itself is −(wᵀr)/(wᵀw) (docs/solve.md, "The
+//! those of the fit with the floor free; the floor itself is −(wᵀr)/(wᵀw) (docs/pipeline.md, "The
 //! dark floor").
 
 use crate::model::{idx, Geometry, Model, Params, N_PARAMS};

@@ -73,7 +73,7 @@ pub struct Session {
     /// The camera's dark floor (pixel value, full scale 1: black level and stray light, e.g. the
     /// mean of a photo with the lens capped), subtracted from every photo; without it the floor is
     /// measured where the photo around the spheres is dark, and before a lit backdrop the joint
-    /// fit fits it (docs/solve.md, "The dark floor").
+    /// fit fits it (docs/pipeline.md, "The dark floor").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub floor: Option<f64>,
     pub images: Vec<SessionImage>,

@@ -4,7 +4,7 @@
 //! Two forms are provided:
 //!
 //! * [`Convolution::Line`] — the convolution on the infinite θ line, in closed form through the
-//!   Faddeeva function `w(z)` (see `../shared/notes/model.md` §1 and the README).
+//!   Faddeeva function `w(z)` (docs/model.md, "CDRF closed form").
 //! * [`Convolution::Wrapped`] — the circular convolution (θ lives on a great circle through the
 //!   light's pole, so light that scatters more than π around the sphere wraps).
 //!
