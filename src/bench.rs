@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-pub const SCHEMA: &str = "workbench.bench/1";
+pub(crate) const SCHEMA: &str = "workbench.bench/1";
 
 #[derive(Clone, Debug)]
 pub struct BenchOptions {
@@ -105,7 +105,7 @@ fn config(d: &Data) -> SessionConfig {
 }
 
 /// The reduction settings the solve offers, every-pixel first.
-pub fn reductions() -> Vec<(String, Reduction)> {
+pub(crate) fn reductions() -> Vec<(String, Reduction)> {
     let mut v = vec![("every pixel".to_string(), Reduction::None)];
     for f in [1u32, 2, 4, 8, 16] {
         v.push((format!("{}° cells", f as f64 * 0.25), Reduction::Factor(f)));

@@ -31,12 +31,12 @@ pub const PALETTE: [RGBColor; 7] = [
     RGBColor(86, 180, 233),  // sky blue
     RGBColor(0, 0, 0),       // black
 ];
-pub const BLUE: RGBColor = PALETTE[0];
-pub const VERMILLION: RGBColor = PALETTE[1];
-pub const GREEN: RGBColor = PALETTE[2];
-pub const ORANGE: RGBColor = PALETTE[3];
+pub(crate) const BLUE: RGBColor = PALETTE[0];
+pub(crate) const VERMILLION: RGBColor = PALETTE[1];
+pub(crate) const GREEN: RGBColor = PALETTE[2];
+pub(crate) const ORANGE: RGBColor = PALETTE[3];
 pub const GREY: RGBColor = RGBColor(120, 120, 120);
-pub const BLACK_LINE: RGBColor = RGBColor(0, 0, 0);
+pub(crate) const BLACK_LINE: RGBColor = RGBColor(0, 0, 0);
 
 /// How a legend entry is drawn.
 #[derive(Clone, Debug, PartialEq)]
@@ -443,16 +443,6 @@ impl Plot {
         }
     }
 
-    /// The plot as SVG text.
-    pub fn to_svg(&self) -> Result<String, String> {
-        self.figure().to_svg()
-    }
-
-    /// The plot as RGB8 pixels.
-    pub fn to_rgb(&self) -> Result<Vec<u8>, String> {
-        self.figure().to_rgb()
-    }
-
     /// Write `<base>.png` and `<base>.svg`.
     pub fn save(&self, base: &Path) -> Result<(PathBuf, PathBuf)> {
         self.figure().save(base)
@@ -530,7 +520,7 @@ impl Figure {
     }
 
     /// The figure as SVG text (rasters embedded as PNG).
-    pub fn to_svg(&self) -> Result<String, String> {
+    pub(crate) fn to_svg(&self) -> Result<String, String> {
         let mut svg = String::new();
         let mut rasters = Rasters {
             svg: true,
@@ -547,7 +537,7 @@ impl Figure {
     }
 
     /// The figure as RGB8 pixels.
-    pub fn to_rgb(&self) -> Result<Vec<u8>, String> {
+    pub(crate) fn to_rgb(&self) -> Result<Vec<u8>, String> {
         let (w, h) = self.size;
         let mut buf = vec![255u8; (w * h * 3) as usize];
         {
@@ -700,7 +690,7 @@ fn category_or_number(v: f64, cats: &Option<Vec<String>>) -> String {
 
 /// A diverging colour map (ColorBrewer RdBu, colour-blind safe) for v in [−1, 1]: negative blue,
 /// zero white, positive red; clamped outside.
-pub fn diverging(v: f64) -> RGBColor {
+pub(crate) fn diverging(v: f64) -> RGBColor {
     const STOPS: [(u8, u8, u8); 11] = [
         (5, 48, 97),
         (33, 102, 172),
@@ -728,14 +718,14 @@ pub fn diverging(v: f64) -> RGBColor {
 }
 
 /// White (0) to `color` (1).
-pub fn shade(color: RGBColor, v: f64) -> RGBColor {
+pub(crate) fn shade(color: RGBColor, v: f64) -> RGBColor {
     let v = v.clamp(0.0, 1.0);
     let mix = |a: u8| (255.0 + (a as f64 - 255.0) * v).round() as u8;
     RGBColor(mix(color.0), mix(color.1), mix(color.2))
 }
 
 /// A vertical colour bar for [`diverging`] over [−limit, limit].
-pub fn colorbar(label: &str, limit: f64) -> Plot {
+pub(crate) fn colorbar(label: &str, limit: f64) -> Plot {
     let n = 256u32;
     let rgb: Vec<u8> = (0..n)
         .flat_map(|j| {

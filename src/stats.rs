@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 /// P(|T| ≤ t) for Student's t with `dof` degrees of freedom (integer, ≥ 1), in closed form
 /// (Abramowitz & Stegun 26.7.3–4): with θ = atan(t/√ν), 2θ/π + (2/π)·sin θ·Σ for odd ν and
 /// sin θ·Σ for even ν, Σ a finite series in cos²θ.
-pub fn t_central(t: f64, dof: u32) -> f64 {
+pub(crate) fn t_central(t: f64, dof: u32) -> f64 {
     let nu = dof.max(1) as f64;
     let th = (t.abs() / nu.sqrt()).atan();
     let (s, c2) = (th.sin(), th.cos().powi(2));
@@ -38,7 +38,7 @@ pub fn t_central(t: f64, dof: u32) -> f64 {
 }
 
 /// The t with P(|T| ≤ t) = `p` (0 < p < 1) for `dof` degrees of freedom, by bisection.
-pub fn t_quantile_central(p: f64, dof: u32) -> f64 {
+pub(crate) fn t_quantile_central(p: f64, dof: u32) -> f64 {
     let (mut lo, mut hi) = (0.0, 1.0);
     while t_central(hi, dof) < p && hi < 1e12 {
         hi *= 2.0;
@@ -55,11 +55,11 @@ pub fn t_quantile_central(p: f64, dof: u32) -> f64 {
 }
 
 /// P(|Z| ≤ 2) for a standard normal Z: the coverage of ±2 standard errors.
-pub const TWO_SIGMA: f64 = 0.954_499_736_103_642;
+pub(crate) const TWO_SIGMA: f64 = 0.954_499_736_103_642;
 
 /// A Gaussian's σ per median absolute deviation: 1/Φ⁻¹(3/4) to the four places every robust
 /// scale here has used (more places would move printed digits, not accuracy).
-pub const MAD_SIGMA: f64 = 1.4826;
+pub(crate) const MAD_SIGMA: f64 = 1.4826;
 
 /// The median of the finite values (the mean of the middle two for an even count); NaN when there
 /// are none.
@@ -78,14 +78,14 @@ pub fn median(v: &[f64]) -> f64 {
 }
 
 /// A sample's robust σ: [`MAD_SIGMA`] × the median absolute deviation about its [`median`].
-pub fn mad_sigma(v: &[f64]) -> f64 {
+pub(crate) fn mad_sigma(v: &[f64]) -> f64 {
     let m = median(v);
     MAD_SIGMA * median(&v.iter().map(|x| (x - m).abs()).collect::<Vec<_>>())
 }
 
 /// The robust σ of deviations about a known centre, from their absolute values: [`MAD_SIGMA`] ×
 /// their nearest-rank median ([`percentile`] at ½: the upper one of an even count).
-pub fn robust_sigma(abs: Vec<f64>) -> f64 {
+pub(crate) fn robust_sigma(abs: Vec<f64>) -> f64 {
     MAD_SIGMA * percentile(abs, 0.5)
 }
 

@@ -133,7 +133,7 @@ pub fn detect(
 /// `CALIB_CB_LARGER` accepts any board of at least 4×3 inner corners and reports the grid it
 /// found (on a copy downscaled to 1000 px). About 0.1–0.3 s; trying the classic detector with
 /// wrong sizes instead can take seconds per size. Returned as the longer side × the shorter.
-pub fn guess_pattern(img: &Gray8) -> Result<Option<Pattern>> {
+pub(crate) fn guess_pattern(img: &Gray8) -> Result<Option<Pattern>> {
     let full = mat_of(img)?;
     let (small, _) = downscaled(&full, img, 1000)?;
     let mut corners = Vector::<Point2f>::new();
@@ -308,7 +308,7 @@ impl Backend for OpenCv {
 
 /// The calibration as OpenCV FileStorage YAML (`camera_matrix`, `distortion_coefficients`,
 /// `image_width`, `image_height`), produced by cv::FileStorage itself.
-pub fn filestorage_yaml(cam: &Camera) -> Result<String> {
+pub(crate) fn filestorage_yaml(cam: &Camera) -> Result<String> {
     let mut fs = core::FileStorage::new(
         "intrinsics.yml",
         core::FileStorage_WRITE | core::FileStorage_MEMORY,

@@ -103,7 +103,7 @@ impl Pose {
     }
 
     /// Angle between the board normal and the optical axis (radians).
-    pub fn tilt(&self) -> f64 {
+    pub(crate) fn tilt(&self) -> f64 {
         (self.rotation() * Vector3::z())
             .z
             .abs()
@@ -122,7 +122,7 @@ pub enum DistortionModel {
 }
 
 impl DistortionModel {
-    pub fn n_intrinsics(&self) -> usize {
+    pub(crate) fn n_intrinsics(&self) -> usize {
         match self {
             DistortionModel::K1K2P1P2 => 8,
             DistortionModel::K1K2P1P2K3 => 9,
@@ -205,7 +205,7 @@ pub fn project_with_jacobian(
 }
 
 /// Corner residuals (observed − projected) of one view.
-pub fn view_residuals(
+pub(crate) fn view_residuals(
     cam: &Camera,
     pose: &Pose,
     corners: &[Vector2<f64>],
@@ -290,7 +290,7 @@ pub fn intrinsic_uncertainty(
 
 /// Views whose RMS error is an outlier: above both twice the median and the median plus 4
 /// robust standard deviations (1.4826 · MAD). Returns their indices.
-pub fn outlier_views(per_view_rms: &[f64]) -> Vec<usize> {
+pub(crate) fn outlier_views(per_view_rms: &[f64]) -> Vec<usize> {
     if per_view_rms.len() < 4 {
         return vec![];
     }
@@ -301,7 +301,7 @@ pub fn outlier_views(per_view_rms: &[f64]) -> Vec<usize> {
 }
 
 /// The threshold [`outlier_views`] applies.
-pub fn outlier_limit(median: f64, robust_sd: f64) -> f64 {
+pub(crate) fn outlier_limit(median: f64, robust_sd: f64) -> f64 {
     (2.0 * median).max(median + 4.0 * robust_sd)
 }
 
@@ -333,7 +333,7 @@ pub struct CrossValidation {
 }
 
 /// K-fold cross-validation over views (round-robin folds).
-pub fn cross_validate(
+pub(crate) fn cross_validate(
     backend: &dyn Backend,
     views: &[&[Vector2<f64>]],
     object: &[Vector3<f64>],
@@ -565,7 +565,11 @@ pub fn calibrate(
 }
 
 /// Coverage and tilt warnings.
-pub fn quality_warnings(_cam: &Camera, used: &[(View, Pose, f64)], size: [u32; 2]) -> Vec<String> {
+pub(crate) fn quality_warnings(
+    _cam: &Camera,
+    used: &[(View, Pose, f64)],
+    size: [u32; 2],
+) -> Vec<String> {
     let mut w = vec![];
     let corners: Vec<Vector2<f64>> = used
         .iter()

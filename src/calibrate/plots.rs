@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
 /// Write all calibration figures (PNG + SVG each) into `dir`; returns the files.
-pub fn write_all(
+pub(crate) fn write_all(
     cal: &Calibration,
     object: &[Vector3<f64>],
     size: [u32; 2],
@@ -29,7 +29,7 @@ pub fn write_all(
 
 /// Bars of per-view RMS error: used views blue, rejected vermillion, with the overall RMS and the
 /// outlier limit.
-pub fn per_view_errors(cal: &Calibration) -> Plot {
+pub(crate) fn per_view_errors(cal: &Calibration) -> Plot {
     let mut rows: Vec<(String, f64, bool)> = cal
         .used
         .iter()
@@ -104,7 +104,7 @@ fn short(f: &str) -> String {
 }
 
 /// Every corner's residual (observed − projected) of the used views, with the RMS circle.
-pub fn residual_scatter(cal: &Calibration, object: &[Vector3<f64>]) -> Plot {
+pub(crate) fn residual_scatter(cal: &Calibration, object: &[Vector3<f64>]) -> Plot {
     let mut xy = vec![];
     for (v, pose, _) in &cal.used {
         xy.extend(
@@ -155,7 +155,7 @@ pub fn residual_scatter(cal: &Calibration, object: &[Vector3<f64>]) -> Plot {
 }
 
 /// Where the corners of the used views fell: an 8×6 grid shaded by corner count, and the corners.
-pub fn coverage_map(cal: &Calibration, size: [u32; 2]) -> Plot {
+pub(crate) fn coverage_map(cal: &Calibration, size: [u32; 2]) -> Plot {
     let corners: Vec<_> = cal
         .used
         .iter()

@@ -65,7 +65,7 @@ type Loaded = Result<(Gray8, Option<ExifInfo>)>;
 const IMAGE_EXTENSIONS: [&str; 5] = ["jpg", "jpeg", "png", "tif", "tiff"];
 
 /// The image files of a folder (not recursive), sorted by name.
-pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut files: Vec<PathBuf> = rd
         .filter_map(|e| e.ok())
@@ -382,7 +382,7 @@ fn no_view(dir: &Path, read: usize, why: &[(String, String)]) -> Error {
 
 /// EXIF sanity checks: one camera and one focal length across the set, and the fitted fx against
 /// the lens's 35 mm equivalent focal length. Lines starting "warning: " are warnings.
-pub fn exif_checks(
+pub(crate) fn exif_checks(
     exif: &[(String, Option<ExifInfo>)],
     fitted_fx: f64,
     size: [u32; 2],

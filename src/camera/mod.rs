@@ -25,7 +25,7 @@ pub struct Distortion {
 }
 
 impl Distortion {
-    pub fn is_zero(&self) -> bool {
+    pub(crate) fn is_zero(&self) -> bool {
         *self == Distortion::default()
     }
 
@@ -35,7 +35,7 @@ impl Distortion {
     }
 
     /// The distortion map and its 2×2 Jacobian.
-    pub fn apply_with_jacobian(&self, p: Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+    pub(crate) fn apply_with_jacobian(&self, p: Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
         let (x, y) = (p.x, p.y);
         let Distortion { k1, k2, p1, p2, k3 } = *self;
         let r2 = x * x + y * y;
@@ -114,12 +114,12 @@ pub struct Camera {
 }
 
 /// Residual allowed when undistorting, in pixels.
-pub const UNDISTORT_TOL_PX: f64 = 1e-10;
+pub(crate) const UNDISTORT_TOL_PX: f64 = 1e-10;
 
 impl Camera {
     /// A 1280×960 camera, f = 1400 px, mild barrel distortion: synthetic data's default and the
     /// tests' camera.
-    pub fn example() -> Camera {
+    pub(crate) fn example() -> Camera {
         Camera {
             fx: 1400.0,
             fy: 1400.0,

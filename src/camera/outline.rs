@@ -39,7 +39,7 @@ impl Projection {
         }
     }
 
-    pub fn is_perspective(&self) -> bool {
+    pub(crate) fn is_perspective(&self) -> bool {
         matches!(self, Projection::Perspective(_))
     }
 }
@@ -61,7 +61,7 @@ pub struct Surface {
 }
 
 /// An orthonormal basis (e1, e2) of the plane perpendicular to a unit vector.
-pub fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+pub(crate) fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let e1 = a
         .cross(&if a.x.abs() < 0.9 {
             Vector3::x()
@@ -74,7 +74,7 @@ pub fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 
 impl Outline {
     /// The cone through three rays, or the circle through three pixels.
-    pub fn through_three(q: [&Vector3<f64>; 3], perspective: bool) -> Option<Outline> {
+    pub(crate) fn through_three(q: [&Vector3<f64>; 3], perspective: bool) -> Option<Outline> {
         if perspective {
             let m = nalgebra::Matrix3::from_rows(&[
                 q[0].transpose(),
@@ -112,8 +112,9 @@ impl Outline {
         }
     }
 
-    /// The outline of a known sphere.
-    pub fn of_sphere(s: &Sphere) -> Option<Outline> {
+    /// The outline of a known sphere (the tests' ground truth).
+    #[cfg(test)]
+    pub(crate) fn of_sphere(s: &Sphere) -> Option<Outline> {
         Some(Outline::Cone {
             axis: s.center.normalize(),
             half_angle: s.cone_half_angle()?,
@@ -147,7 +148,7 @@ impl Outline {
     }
 
     /// The point in the middle: the cone axis or the circle centre.
-    pub fn center_point(&self) -> Vector3<f64> {
+    pub(crate) fn center_point(&self) -> Vector3<f64> {
         match self {
             Outline::Cone { axis, .. } => *axis,
             Outline::Circle { center, .. } => Vector3::new(center.x, center.y, 0.0),
@@ -179,7 +180,7 @@ impl Outline {
     }
 
     /// The point whose surface normal is `n` (on the visible side: n·v > 0 is not checked).
-    pub fn point_with_normal(&self, n: &Vector3<f64>) -> Vector3<f64> {
+    pub(crate) fn point_with_normal(&self, n: &Vector3<f64>) -> Vector3<f64> {
         match self {
             Outline::Cone { axis, half_angle } => (axis / half_angle.sin() + n).normalize(),
             Outline::Circle { center, radius } => {
@@ -191,7 +192,7 @@ impl Outline {
 
     /// The point on the sphere where the normal bisects the light and the view: the mirror point
     /// of a light direction (found by a fixed-point iteration on the per-point view vector).
-    pub fn mirror_point(&self, light: &Vector3<f64>) -> Option<Vector3<f64>> {
+    pub(crate) fn mirror_point(&self, light: &Vector3<f64>) -> Option<Vector3<f64>> {
         let mut q = self.center_point();
         let mut v = self.surface(&q)?.view;
         for _ in 0..50 {
@@ -211,7 +212,7 @@ impl Outline {
     /// A copy moved by `d` in the outline's own three parameters: the axis turned by (d0, d1)
     /// radians and the half-angle grown by d2 (cone), or the centre moved by (d0, d1) and the
     /// radius grown by d2 pixels (circle).
-    pub fn moved(&self, d: &Vector3<f64>) -> Outline {
+    pub(crate) fn moved(&self, d: &Vector3<f64>) -> Outline {
         match self {
             Outline::Cone { axis, half_angle } => {
                 let (e1, e2) = tangent_basis(axis);
@@ -228,7 +229,7 @@ impl Outline {
     }
 
     /// The size of one pixel in the units of [`Outline::moved`].
-    pub fn pixel_unit(&self, proj: &Projection) -> f64 {
+    pub(crate) fn pixel_unit(&self, proj: &Projection) -> f64 {
         match self {
             Outline::Cone { half_angle, .. } => half_angle / self.radius_px(proj),
             Outline::Circle { .. } => 1.0,
@@ -272,7 +273,7 @@ impl Outline {
     }
 
     /// Largest pixel distance between the rims of two outlines (72 points compared).
-    pub fn distance_px(&self, other: &Outline, proj: &Projection) -> f64 {
+    pub(crate) fn distance_px(&self, other: &Outline, proj: &Projection) -> f64 {
         self.rim(72)
             .iter()
             .zip(other.rim(72))
@@ -282,7 +283,7 @@ impl Outline {
 
     /// Inclusive pixel box [x0, y0, x1, y1] of the silhouette (720 rim points), padded by `pad`
     /// pixels and clipped to a `width` × `height` image; `None` when part of the rim has no pixel.
-    pub fn pixel_box(
+    pub(crate) fn pixel_box(
         &self,
         proj: &Projection,
         pad: f64,

@@ -50,7 +50,7 @@ impl Ellipse {
     }
 
     /// The ellipse of a symmetric 3×3 conic matrix M (points p with [p 1] M [p 1]ᵀ = 0).
-    pub fn from_conic(m: &Matrix3<f64>) -> Option<Ellipse> {
+    pub(crate) fn from_conic(m: &Matrix3<f64>) -> Option<Ellipse> {
         let a = Matrix2::new(m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]);
         let b = Vector2::new(m[(0, 2)], m[(1, 2)]);
         let center = -a.try_inverse()? * b;
@@ -110,19 +110,19 @@ impl Sphere {
     }
 
     /// Half-angle of the tangent cone, asin(R/|C|); `None` if the camera is inside the sphere.
-    pub fn cone_half_angle(&self) -> Option<f64> {
+    pub(crate) fn cone_half_angle(&self) -> Option<f64> {
         let d = self.center.norm();
         (d > self.radius).then(|| (self.radius / d).asin())
     }
 
     /// Q = C Cᵀ − (|C|² − R²) I: the silhouette cone as a conic in normalised coordinates.
-    pub fn normalized_conic(&self) -> Matrix3<f64> {
+    pub(crate) fn normalized_conic(&self) -> Matrix3<f64> {
         let c = self.center;
         c * c.transpose() - Matrix3::identity() * (c.norm_squared() - self.radius * self.radius)
     }
 
     /// The silhouette conic in (undistorted, ideal pinhole) pixel coordinates: K⁻ᵀ Q K⁻¹.
-    pub fn image_conic(&self, cam: &Camera) -> Matrix3<f64> {
+    pub(crate) fn image_conic(&self, cam: &Camera) -> Matrix3<f64> {
         let kinv = cam
             .k()
             .try_inverse()
@@ -137,7 +137,7 @@ impl Sphere {
     }
 
     /// Nearest intersection of the ray t·d (d unit, from the camera centre) with the sphere.
-    pub fn intersect(&self, d: &Vector3<f64>) -> Option<f64> {
+    pub(crate) fn intersect(&self, d: &Vector3<f64>) -> Option<f64> {
         let b = d.dot(&self.center);
         let disc = b * b - (self.center.norm_squared() - self.radius * self.radius);
         if disc < 0.0 || b <= 0.0 {

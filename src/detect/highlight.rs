@@ -673,12 +673,12 @@ impl Combined {
 /// The least error the spheres of a session share (radians): on the project's own renders the
 /// combined light lies 0.01–0.05° from the truth with formal errors of 0.012–0.016° (black, grey
 /// card, table; docs/measurements.md), the same sign on every sphere, so averaging does not remove it.
-pub const SHARED_FLOOR: f64 = 0.03 * std::f64::consts::PI / 180.0;
+pub(crate) const SHARED_FLOOR: f64 = 0.03 * std::f64::consts::PI / 180.0;
 
 /// Combine highlights' lights ([`combine`]); the trend-model error, shared by every sphere and so
 /// not averaged down, is added back: the median `trend_spread` of the estimates kept (at least
 /// [`SHARED_FLOOR`]), isotropic in the tangent plane.
-pub fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combined> {
+pub(crate) fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combined> {
     let est: Vec<_> = hs.iter().map(|h| (h.light, h.cov)).collect();
     let mut c = combine(&est, floor)?;
     let kept: Vec<f64> = hs
@@ -697,7 +697,7 @@ pub fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combined> {
 /// floored at `floor` radians, a modelling error the statistics do not see), starting from the
 /// medoid; estimates beyond 5σ are outliers. The combined covariance is inflated by the reduced
 /// χ² when the estimates scatter more than their errors say.
-pub fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Option<Combined> {
+pub(crate) fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Option<Combined> {
     if est.is_empty() {
         return None;
     }

@@ -28,12 +28,12 @@ use silhouette::{blobs, Plane};
 use std::path::{Path, PathBuf};
 
 /// The band of pixels the edge model fits: this far inside and outside the silhouette (px).
-pub const BAND_INNER_PX: f64 = 4.0;
-pub const BAND_OUTER_PX: f64 = 3.0;
+pub(crate) const BAND_INNER_PX: f64 = 4.0;
+pub(crate) const BAND_OUTER_PX: f64 = 3.0;
 
 /// Floor on a single light estimate's uncertainty when combining (radians): the modelling error
 /// the per-fit statistics do not see.
-pub const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
+pub(crate) const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
 
 use crate::formats::detections::*;
 
@@ -61,7 +61,7 @@ pub struct Found {
 }
 
 /// Locate the highlight on every sphere of a photo (once its outlines are final).
-pub fn locate_highlights(
+pub(crate) fn locate_highlights(
     img: &LinearRgb,
     lum: &Plane,
     proj: &Projection,
@@ -210,7 +210,7 @@ pub fn luminance(img: &LinearRgb) -> Plane {
 
 /// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
 /// session). `lum` is the photo's [`luminance`].
-pub fn find_spheres(
+pub(crate) fn find_spheres(
     img: &LinearRgb,
     lum: &Plane,
     proj: &Projection,
@@ -434,7 +434,7 @@ pub fn find_spheres(
 /// refit each outline over all photos at once. Each photo lights a different part of the rim, so
 /// the edge model's light-dependent errors average out (photometric-stereo sets). `per_image`:
 /// each photo, its luminance and its silhouettes.
-pub fn pool_static_spheres(
+pub(crate) fn pool_static_spheres(
     per_image: &mut [(LinearRgb, Plane, Vec<Silhouette>)],
     proj: &Projection,
 ) {

@@ -7,11 +7,11 @@ use crate::formats::photo::LinearRgb;
 use nalgebra::{Vector2, Vector3};
 
 /// Any channel clipped at full scale.
-pub const SATURATED: u8 = 1;
+pub(crate) const SATURATED: u8 = 1;
 /// Within 1.5 px of the silhouette: the pixel may straddle it.
 pub const EDGE: u8 = 2;
 /// Inside the specular highlight (normal within the highlight radius of the half vector).
-pub const HIGHLIGHT: u8 = 4;
+pub(crate) const HIGHLIGHT: u8 = 4;
 
 /// One pixel of one sphere.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -68,7 +68,7 @@ pub struct EdgePoint {
 
 /// Edge points of a region [x0, y0, x1, y1] (inclusive) whose gradient magnitude exceeds
 /// `threshold`: Sobel, non-maximum suppression along the gradient, parabolic sub-pixel peak.
-pub fn edge_points(
+pub(crate) fn edge_points(
     img: &Plane,
     region: [u32; 4],
     threshold: f64,
@@ -168,7 +168,7 @@ fn inward(o: &Outline, proj: &Projection, e: &EdgePoint, cos_tol: f64) -> bool {
 
 /// Gauss–Newton on the pixel distances of points from an outline (finite-difference Jacobian in
 /// the outline's own parameters).
-pub fn least_squares(o: &Outline, proj: &Projection, pts: &[Vector3<f64>]) -> Outline {
+pub(crate) fn least_squares(o: &Outline, proj: &Projection, pts: &[Vector3<f64>]) -> Outline {
     let mut o = *o;
     for _ in 0..30 {
         let r_px = o.radius_px(proj);
@@ -216,7 +216,7 @@ pub struct OutlineFit {
 
 /// Robust outline through edge points. `radius_px` bounds the image radius of candidates;
 /// `tol_px` is the inlier distance. Deterministic (fixed-seed sampling).
-pub fn ransac(
+pub(crate) fn ransac(
     pts: &[EdgePoint],
     proj: &Projection,
     radius_px: (f64, f64),
@@ -480,7 +480,7 @@ fn band_residuals(
 /// current outline, over one or more photos of the same, unmoved sphere (`images`: luminance and
 /// pixels to leave out, e.g. saturated ones). Each photo has its own per-sector terms; the
 /// outline and the blur are shared.
-pub fn refine(
+pub(crate) fn refine(
     images: &[(&Plane, Option<&[bool]>)],
     proj: &Projection,
     start: &Outline,
@@ -674,7 +674,7 @@ pub fn refine(
 
 /// [`refine`] repeated from its own result (the band and the sector weights re-centred on the
 /// better outline) until the outline moves less than 0.01 px, at most four times.
-pub fn refine_repeated(
+pub(crate) fn refine_repeated(
     images: &[(&Plane, Option<&[bool]>)],
     proj: &Projection,
     start: &Outline,
@@ -709,7 +709,7 @@ pub struct Blob {
 
 impl Blob {
     /// Whether the blob touches the image border.
-    pub fn touches_border(&self, width: u32, height: u32) -> bool {
+    pub(crate) fn touches_border(&self, width: u32, height: u32) -> bool {
         self.bbox[0] == 0
             || self.bbox[1] == 0
             || self.bbox[2] + 1 >= width

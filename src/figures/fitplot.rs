@@ -25,8 +25,8 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// Channel names and their colours (Okabe–Ito, distinguishable without colour vision).
-pub const CHANNELS: [&str; 3] = ["red", "green", "blue"];
-pub const CHANNEL_COLORS: [RGBColor; 3] = [VERMILLION, GREEN, BLUE];
+pub(crate) const CHANNELS: [&str; 3] = ["red", "green", "blue"];
+pub(crate) const CHANNEL_COLORS: [RGBColor; 3] = [VERMILLION, GREEN, BLUE];
 /// Pixels evaluated per sphere (every k-th beyond this).
 const PIXELS: usize = 200_000;
 /// Points drawn per scatter (every k-th beyond this): keeps the SVGs near a megabyte.
@@ -125,7 +125,13 @@ impl Group<'_> {
 
 /// Medians of y in windows of x of width `window` every `step`, where a window holds at least
 /// `min` points.
-pub fn running_median(x: &[f64], y: &[f64], window: f64, step: f64, min: usize) -> Vec<(f64, f64)> {
+pub(crate) fn running_median(
+    x: &[f64],
+    y: &[f64],
+    window: f64,
+    step: f64,
+    min: usize,
+) -> Vec<(f64, f64)> {
     let mut xy: Vec<(f64, f64)> = x
         .iter()
         .zip(y)
@@ -497,7 +503,7 @@ fn residual_image(g: &Group, e: &Evaluated) -> Option<Figure> {
 }
 
 /// Short display names of the parameters.
-pub fn short_name(name: &str) -> String {
+pub(crate) fn short_name(name: &str) -> String {
     match name {
         "sigma0_r" => "σ0 r",
         "sigma0_g" => "σ0 g",
@@ -744,7 +750,7 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
 }
 
 /// Draw every figure of a fit into `dir` (PNG and SVG each) with `index.html`; returns the files.
-pub fn write_all(
+pub(crate) fn write_all(
     fit: &FitFile,
     fit_path: &Path,
     spheres: &[SphereData],

@@ -27,7 +27,7 @@ pub fn escape(s: &str) -> String {
 }
 
 /// A value and its standard error with digits enough for the error's two leading figures.
-pub fn with_error(v: f64, e: f64) -> String {
+pub(crate) fn with_error(v: f64, e: f64) -> String {
     if !v.is_finite() {
         return format!("{v}");
     }
@@ -44,7 +44,7 @@ td.n{text-align:right;font-variant-numeric:tabular-nums}figure{margin:1.5em 0}im
 figcaption{color:#444;margin-top:0.3em}.bad{color:#b2182b;font-weight:bold}";
 
 /// Write `dir/index.html` for a fit and its figures.
-pub fn write_index(
+pub(crate) fn write_index(
     fit: &FitFile,
     fit_path: &Path,
     figures: &[Named],

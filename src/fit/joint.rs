@@ -29,19 +29,19 @@ use serde::{Deserialize, Serialize};
 
 /// Largest predicted shift of any parameter that a reduction level may cause (in standard errors;
 /// or below the parameter's [`crate::fit::reduce::tolerance`]).
-pub const SHIFT_LIMIT: f64 = crate::fit::reduce::SHIFT_STD;
+pub(crate) const SHIFT_LIMIT: f64 = crate::fit::reduce::SHIFT_STD;
 /// The highlight region pooled in pixel blocks, in detector highlight radii.
-pub const HIGHLIGHT_KEEP: f64 = 1.0;
+pub(crate) const HIGHLIGHT_KEEP: f64 = 1.0;
 /// Block sizes (pixels) tried for the highlight, largest first.
-pub const HIGHLIGHT_BLOCKS: [u32; 4] = [16, 8, 4, 2];
+pub(crate) const HIGHLIGHT_BLOCKS: [u32; 4] = [16, 8, 4, 2];
 /// Huber threshold (in robust σ of the residuals).
-pub const HUBER_K: f64 = 1.345;
+pub(crate) const HUBER_K: f64 = 1.345;
 /// Default prior on η (a typical wax, soap or resin).
-pub const ETA_PRIOR: (f64, f64) = (1.45, 0.05);
+pub(crate) const ETA_PRIOR: (f64, f64) = (1.45, 0.05);
 /// Roughness held when the data cannot determine it.
-pub const ALPHA_PRIOR: f64 = 0.1;
+pub(crate) const ALPHA_PRIOR: f64 = 0.1;
 /// Start of the two-Gaussian kernel: tail weight and width ratio.
-pub const KERNEL_START: (f64, f64) = (0.2, 3.0);
+pub(crate) const KERNEL_START: (f64, f64) = (0.2, 3.0);
 
 /// How many residuals the solver sees.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,7 +70,7 @@ impl Extensions {
     }
 
     /// The extensions of a fit: those whose parameters were free.
-    pub fn of_fit(free: &[bool; N_PARAMS]) -> Extensions {
+    pub(crate) fn of_fit(free: &[bool; N_PARAMS]) -> Extensions {
         Extensions {
             sigma_exponent: free[idx::SIGMA_EXPONENT],
             albedo_curvature: free[idx::ALBEDO_CURVATURE],
@@ -231,7 +231,7 @@ pub fn prior_tension(value: f64, std: f64, prior: &Prior) -> f64 {
 /// so L / T(φ) = a′ n·l is linear in b = a′ l: a least-squares fit of b over the brightest
 /// pixels (green, L/T above 40% of its maximum), repeated once over the pixels with θ < 60° from
 /// the first estimate, gives l = b / |b| (single-light photometric stereo).
-pub fn light_from_shading(spheres: &[&SphereData], eta: f64) -> Vector3<f64> {
+pub(crate) fn light_from_shading(spheres: &[&SphereData], eta: f64) -> Vector3<f64> {
     let pts: Vec<(Vector3<f64>, f64)> = spheres
         .iter()
         .flat_map(|sp| sp.obs.iter())
@@ -262,7 +262,7 @@ pub fn light_from_shading(spheres: &[&SphereData], eta: f64) -> Vector3<f64> {
 
 /// σ0 per channel by a search over a log grid, the albedo in closed form at each point (least
 /// squares of a · T(φ) · f(θ; σ) against the data, weighted), without the specular term.
-pub fn diffuse_start(
+pub(crate) fn diffuse_start(
     model: &Model,
     obs: &[Obs],
     light: &LightAngles,
@@ -1159,17 +1159,17 @@ fn choose_reduction(
 pub const PULL_WARN: f64 = 3.0;
 /// Floor on the light prior's width (radians): the detector's modelling error that its own
 /// statistics do not see.
-pub const LIGHT_PRIOR_FLOOR: f64 = crate::detect::LIGHT_FLOOR;
+pub(crate) const LIGHT_PRIOR_FLOOR: f64 = crate::detect::LIGHT_FLOOR;
 
 /// A light closer than this to the viewing direction (degrees) gets a note: θ ≈ φ.
-pub const NEAR_VIEW_DEG: f64 = 15.0;
+pub(crate) const NEAR_VIEW_DEG: f64 = 15.0;
 /// Above this χ²/dof (residuals twice the measured noise) the fit warns.
-pub const CHI2_WARN: f64 = 4.0;
+pub(crate) const CHI2_WARN: f64 = 4.0;
 /// Above this fraction of clipped sphere pixels the fit warns.
-pub const CLIPPED_WARN: f64 = 0.5;
+pub(crate) const CLIPPED_WARN: f64 = 0.5;
 
 /// Δχ² below which σ0 → 0 or → ∞ counts as fitting the data as well (3σ for one parameter).
-pub const RESOLVED_CHI2: f64 = 9.0;
+pub(crate) const RESOLVED_CHI2: f64 = 9.0;
 /// σ = σ0/r below this at the largest radius, or above this at the smallest, is checked against
 /// the limits (radians).
 const SIGMA_CHECK: (f64, f64) = (0.05, 1.5);
@@ -1243,7 +1243,7 @@ fn resolution_limits(
 /// Free parameters the data leave undetermined: a standard error that is not finite, or larger
 /// than the parameter's plausible range (relative 50% for positive ones, 0.5 for η − 1, 1 for the
 /// extensions, 10° for the light angles).
-pub fn poorly_determined(f: &Fit) -> Vec<usize> {
+pub(crate) fn poorly_determined(f: &Fit) -> Vec<usize> {
     let p = f.params.to_vec();
     (0..N_PARAMS)
         .filter(|&k| f.free[k])

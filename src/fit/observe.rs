@@ -70,7 +70,7 @@ pub struct Crop {
 }
 
 impl Crop {
-    pub const MAX_CELLS: u32 = 160;
+    pub(crate) const MAX_CELLS: u32 = 160;
 
     /// The crop of `bx` = [x0, y0, x1, y1] (inclusive pixel box), grown by 10% each side.
     pub fn of(img: &crate::formats::photo::LinearRgb, bx: [u32; 4]) -> Crop {
@@ -156,7 +156,7 @@ pub struct Observed {
 /// onto `reference`. The model sees a sphere only through n·l, n·v and l·v, so photos turned this
 /// way share one light and the joint fit needs no other change: the material is shared, and the
 /// fitted light is the reference's, each photo's being the rotation's inverse applied to it.
-pub fn light_frames(
+pub(crate) fn light_frames(
     lights: &[Vector3<f64>],
     reference: &Vector3<f64>,
 ) -> Vec<nalgebra::Rotation3<f64>> {
@@ -217,12 +217,12 @@ pub fn background(img: &crate::formats::photo::LinearRgb, boxes: &[[u32; 4]]) ->
 
 /// The highest level (pixel value, full scale 1) taken for a dark room's floor (stray light and
 /// black level) rather than a lit backdrop.
-pub const DARK_FLOOR_MAX: f64 = 0.01;
+pub(crate) const DARK_FLOOR_MAX: f64 = 0.01;
 
 /// The noise model σ² = a + b·L per channel from adjacent-pixel differences (see the module
 /// docs); `floor` is the smallest σ allowed (a quantisation step). Without enough pairs: a
 /// constant.
-pub fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
+pub(crate) fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
     let skip = samples::SATURATED | samples::EDGE | samples::HIGHLIGHT;
     let mut pairs: [Vec<(f64, f64)>; 3] = Default::default();
     for w in s.windows(2) {

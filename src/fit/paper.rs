@@ -16,9 +16,9 @@ use nalgebra::Vector3;
 
 /// Pixels whose normal lies within this angle of the half vector are masked (at least; twice the
 /// detector's highlight radius when that is larger).
-pub const MASK_DEG: f64 = 10.0;
+pub(crate) const MASK_DEG: f64 = 10.0;
 /// Cell width of the per-radius fits (factor of 0.25°): 1°.
-pub const FACTOR: u32 = 4;
+pub(crate) const FACTOR: u32 = 4;
 
 /// The baseline's result.
 #[derive(Clone, Debug)]
@@ -61,7 +61,7 @@ impl PaperFit {
 
 /// The model that predicts photos from the procedure's parameters: the exit transmission the
 /// procedure divided out multiplied back, and no entry transmission (the paper has none).
-pub fn predicting_model() -> Model {
+pub(crate) fn predicting_model() -> Model {
     Model {
         entry_fresnel: false,
         ..Model::default()
@@ -69,7 +69,7 @@ pub fn predicting_model() -> Model {
 }
 
 /// Inverse-variance weighted mean with its standard error, widened by √(χ²/dof) when > 1.
-pub fn combine(values: &[(f64, f64)]) -> (f64, f64) {
+pub(crate) fn combine(values: &[(f64, f64)]) -> (f64, f64) {
     let good: Vec<(f64, f64)> = values
         .iter()
         .cloned()

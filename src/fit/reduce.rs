@@ -26,7 +26,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use rayon::prelude::*;
 
 /// Width of the fine cells (radians): 0.25°.
-pub const BASE_WIDTH: f64 = 0.25 * std::f64::consts::PI / 180.0;
+pub(crate) const BASE_WIDTH: f64 = 0.25 * std::f64::consts::PI / 180.0;
 /// The reduction levels offered, as multiples of [`BASE_WIDTH`] (0.25° to 4°).
 pub const FACTORS: [u32; 5] = [1, 2, 4, 8, 16];
 
@@ -72,7 +72,7 @@ impl Cell {
     }
 
     /// Covariance of the members' (θ, φ): [var θ, var φ, cov].
-    pub fn covariance(&self) -> [f64; 3] {
+    pub(crate) fn covariance(&self) -> [f64; 3] {
         let (mt, mp) = self.mean();
         let m = &self.moments;
         [
@@ -215,7 +215,7 @@ impl Pooled {
     }
 
     /// Pool the spheres' pixels (sphere k: `obs[k]`, with its pixel positions) in parallel.
-    pub fn of_spheres(light: Vector3<f64>, keep: f64, spheres: &[SphereObs]) -> Pooled {
+    pub(crate) fn of_spheres(light: Vector3<f64>, keep: f64, spheres: &[SphereObs]) -> Pooled {
         let parts: Vec<Pooled> = spheres
             .par_iter()
             .enumerate()
@@ -236,7 +236,7 @@ impl Pooled {
     }
 
     /// The cells at every level of [`FACTORS`], each merged from the next finer one.
-    pub fn pyramid(&self) -> Vec<(u32, Vec<Cell>)> {
+    pub(crate) fn pyramid(&self) -> Vec<(u32, Vec<Cell>)> {
         let mut out: Vec<(u32, Vec<Cell>)> = vec![(1, self.cells.clone())];
         for &f in &FACTORS[1..] {
             let (pf, prev) = out.last().expect("a level");
@@ -319,7 +319,7 @@ impl Pooled {
 
     /// The second-order bias of each cell's mean against the model at its virtual pixel
     /// (weighted, three per cell), for the given parameters.
-    pub fn biases(&self, cells: &[Cell], model: &Model, p: &Params) -> Vec<f64> {
+    pub(crate) fn biases(&self, cells: &[Cell], model: &Model, p: &Params) -> Vec<f64> {
         let h = 0.25 * BASE_WIDTH;
         let b: Vec<f64> = cells
             .par_iter()
@@ -445,9 +445,9 @@ impl Pooled {
 }
 
 /// Cells used to estimate a level's shift (every k-th beyond this many).
-pub const SHIFT_CELLS: usize = 10_000;
+pub(crate) const SHIFT_CELLS: usize = 10_000;
 /// A shift of this many standard errors is accepted.
-pub const SHIFT_STD: f64 = 0.3;
+pub(crate) const SHIFT_STD: f64 = 0.3;
 
 /// The shift of a parameter (in the solver's unbounded units) that is accepted whatever its
 /// standard error, a tenth or less of the accuracy the rest of the chain reaches (README,
@@ -505,7 +505,7 @@ fn group(cells: &[Cell], key: impl Fn(&Cell) -> (i64, i64, bool) + Sync) -> Vec<
 
 /// The unit normal at angle θ from `light` and φ from `view`, on the side of the light–view plane
 /// where `near` lies (`None` when the two directions are parallel).
-pub fn normal_with_angles(
+pub(crate) fn normal_with_angles(
     view: &Vector3<f64>,
     light: &Vector3<f64>,
     theta: f64,

@@ -77,7 +77,7 @@ pub fn from_unbounded(u: &[f64; N_PARAMS]) -> ([f64; N_PARAMS], [f64; N_PARAMS])
 }
 
 /// Bound of the unbounded (log) coordinates: e^±60 ≈ 10^±26.
-pub const MAP_LIMIT: f64 = 60.0;
+pub(crate) const MAP_LIMIT: f64 = 60.0;
 
 /// A Gaussian prior on one parameter (physical units).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -244,18 +244,14 @@ impl Problem<'_> {
 impl Problem<'_> {
     /// Standard errors (physical units, 0 for parameters not free) and the correlation matrix of
     /// the free parameters at the current values, from σ²(JᵀJ)⁻¹ with σ² = 2·cost/(m − n) over
-    /// the observation rows (the prior rows are already in units of their σ); and the cost
-    /// ½Σr² of the observations.
-    pub fn covariance(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64) {
-        let (std, correlation, cost, _) = self.covariance_and_floor();
-        (std, correlation, cost)
-    }
-
-    /// [`Self::covariance`], and the dark floor when it is profiled out: its value
+    /// the observation rows (the prior rows are already in units of their σ); the cost ½Σr² of
+    /// the observations; and the dark floor when it is profiled out: its value
     /// f = −(wᵀr)/(wᵀw) per channel and its standard error from σ²/(wᵀw) + ḡᵀCḡ, with
     /// ḡ = (wᵀJ)/(wᵀw) and C the other parameters' covariance (the two parts are uncorrelated:
     /// the parameters are fitted to residuals orthogonal to w).
-    pub fn covariance_and_floor(&self) -> ([f64; N_PARAMS], DMatrix<f64>, f64, Option<Floor>) {
+    pub(crate) fn covariance_and_floor(
+        &self,
+    ) -> ([f64; N_PARAMS], DMatrix<f64>, f64, Option<Floor>) {
         let dpdu = from_unbounded(&self.u).1;
         let idx = self.free_idx();
         let n = idx.len();
@@ -569,7 +565,7 @@ pub struct Fit {
 }
 
 /// The observations less a dark floor per channel (the observations' units).
-pub fn less_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
+pub(crate) fn less_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
     obs.iter()
         .map(|o| {
             let mut o = *o;
@@ -583,7 +579,7 @@ pub fn less_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
 
 impl Fit {
     /// The floor to add to the model's radiance to predict the observations (0 when known).
-    pub fn floor_value(&self) -> [f64; 3] {
+    pub(crate) fn floor_value(&self) -> [f64; 3] {
         self.floor.map_or([0.0; 3], |f| f.value)
     }
 }
@@ -650,7 +646,7 @@ pub fn fit_with_floor(
 /// weight). Returns the reweighted observations, how many channel residuals were down-weighted,
 /// and whether any weight moved by more than 1% from `current`. `floor`: the fit's dark floor
 /// (added to the model), 0 when it is known.
-pub fn huber_weights(
+pub(crate) fn huber_weights(
     model: &Model,
     obs: &[Obs],
     current: &[Obs],

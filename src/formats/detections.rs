@@ -8,7 +8,7 @@ use crate::formats::session::LightMode;
 use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-pub const SCHEMA: &str = "workbench.detections/1";
+pub(crate) const SCHEMA: &str = "workbench.detections/1";
 
 /// A fitted outline, as stored.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

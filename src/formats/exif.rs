@@ -36,8 +36,8 @@ pub struct ExifInfo {
 }
 
 /// ISO and f-number at which the relative exposure is 1 (with 1/30 s).
-pub const REFERENCE_ISO: f64 = 100.0;
-pub const REFERENCE_F_NUMBER: f64 = 8.0;
+pub(crate) const REFERENCE_ISO: f64 = 100.0;
+pub(crate) const REFERENCE_F_NUMBER: f64 = 8.0;
 
 /// The relative exposure of the convention above.
 pub fn relative_exposure(exposure_time_s: f64, iso: f64, f_number: f64) -> f64 {
@@ -83,7 +83,7 @@ fn orientation_words(o: u16) -> &'static str {
 impl ExifInfo {
     /// The relative exposure, with `iso` and `f_number` standing in for missing tags; `None`
     /// without an exposure time.
-    pub fn relative_exposure_with(&self, iso: f64, f_number: f64) -> Option<f64> {
+    pub(crate) fn relative_exposure_with(&self, iso: f64, f_number: f64) -> Option<f64> {
         Some(relative_exposure(
             self.exposure_time_s?,
             self.iso.map_or(iso, |v| v as f64),
@@ -97,7 +97,13 @@ impl ExifInfo {
     }
 
     /// Settings at ISO 100 and f/8 that give a relative exposure (only the time varies).
-    pub fn for_exposure(exposure: f64, make: &str, model: &str, focal_mm: f64, f35: u32) -> Self {
+    pub(crate) fn for_exposure(
+        exposure: f64,
+        make: &str,
+        model: &str,
+        focal_mm: f64,
+        f35: u32,
+    ) -> Self {
         ExifInfo {
             make: make.into(),
             model: model.into(),
@@ -111,7 +117,7 @@ impl ExifInfo {
     }
 
     /// Encode as a TIFF/Exif block (the payload of a JPEG APP1 "Exif" segment).
-    pub fn to_tiff(&self) -> Result<Vec<u8>> {
+    pub(crate) fn to_tiff(&self) -> Result<Vec<u8>> {
         // Rationals with a fixed denominator (ExposureTime keeps a power-of-ten denominator so that
         // 1/30 s survives with 9 significant digits).
         let rational = |v: f64, denom: u32| Rational {

@@ -8,7 +8,7 @@ use crate::model::{LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub const SCHEMA: &str = "workbench.fit/1";
+pub(crate) const SCHEMA: &str = "workbench.fit/1";
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -336,7 +336,7 @@ impl FitFile {
 
     /// The session this fit was solved on: the file it names, or session.json beside the fit
     /// when that has moved.
-    pub fn session_path(&self, fit_path: &Path) -> Result<PathBuf> {
+    pub(crate) fn session_path(&self, fit_path: &Path) -> Result<PathBuf> {
         let named = PathBuf::from(&self.session);
         let beside = fit_path
             .parent()

@@ -6,7 +6,7 @@ use crate::formats::output::read_json;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-pub const SCHEMA: &str = "workbench.intrinsics/1";
+pub(crate) const SCHEMA: &str = "workbench.intrinsics/1";
 
 /// Standard deviations of the intrinsics (px, and unitless for distortion).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -53,7 +53,7 @@ pub struct IntrinsicsFile {
 
 impl IntrinsicsFile {
     /// The exact camera of a synthetic scene.
-    pub fn from_truth(cam: &Camera) -> Self {
+    pub(crate) fn from_truth(cam: &Camera) -> Self {
         IntrinsicsFile {
             schema: SCHEMA.into(),
             image_size: cam.image_size,

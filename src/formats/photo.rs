@@ -11,7 +11,7 @@ use image::{ExtendedColorType, ImageEncoder};
 use std::path::Path;
 
 /// sRGB encoding of a linear value in [0, 1].
-pub fn srgb_encode(x: f64) -> f64 {
+pub(crate) fn srgb_encode(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
     if x <= 0.003_130_8 {
         12.92 * x
@@ -31,18 +31,18 @@ pub fn srgb_decode(y: f64) -> f64 {
 }
 
 /// Diagonal of a 36×24 mm frame, which "35 mm equivalent" focal lengths refer to.
-pub const FULL_FRAME_DIAGONAL_MM: f64 = 43.266_615;
+pub(crate) const FULL_FRAME_DIAGONAL_MM: f64 = 43.266_615;
 
 /// The 35 mm equivalent focal length of a lens on a sensor `sensor_width_mm` wide imaging
 /// `size` pixels (square pixels), by the diagonal.
-pub fn focal_35mm_equivalent(focal_mm: f64, sensor_width_mm: f64, size: [u32; 2]) -> f64 {
+pub(crate) fn focal_35mm_equivalent(focal_mm: f64, sensor_width_mm: f64, size: [u32; 2]) -> f64 {
     let diag_px = (size[0] as f64).hypot(size[1] as f64);
     let sensor_diag_mm = sensor_width_mm * diag_px / size[0] as f64;
     focal_mm * FULL_FRAME_DIAGONAL_MM / sensor_diag_mm
 }
 
 /// The focal length in pixels that a 35 mm equivalent focal length implies for an image size.
-pub fn fx_from_35mm(f35_mm: f64, size: [u32; 2]) -> f64 {
+pub(crate) fn fx_from_35mm(f35_mm: f64, size: [u32; 2]) -> f64 {
     f35_mm * (size[0] as f64).hypot(size[1] as f64) / FULL_FRAME_DIAGONAL_MM
 }
 
@@ -148,12 +148,12 @@ pub fn load_gray8(path: &Path) -> Result<Gray8> {
 /// The largest photo read (pixels): 64 MP, above any sensor in common use for this work; a
 /// larger image is refused before decoding (it would need more than 64 · 10⁶ · 12 bytes of
 /// linear RGB).
-pub const MAX_PIXELS: u64 = 64_000_000;
+pub(crate) const MAX_PIXELS: u64 = 64_000_000;
 /// The smallest photo side that can hold a sphere worth fitting (pixels).
-pub const MIN_SIDE: u32 = 32;
+pub(crate) const MIN_SIDE: u32 = 32;
 
 /// Refuse images too large to decode or too small to hold a sphere.
-pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
+pub(crate) fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
     let n = width as u64 * height as u64;
     if n > MAX_PIXELS {
         return Err(Error::invalid(

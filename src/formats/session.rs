@@ -6,7 +6,7 @@ use crate::formats::output::read_json;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub const SCHEMA: &str = "workbench.session/1";
+pub(crate) const SCHEMA: &str = "workbench.session/1";
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -21,9 +21,9 @@ use std::f64::consts::FRAC_PI_2;
 use std::sync::OnceLock;
 
 /// Highest harmonic of the series.
-pub const ORDER: usize = 10;
+pub(crate) const ORDER: usize = 10;
 /// Angles the series is fitted on.
-pub const NODES: usize = 400;
+pub(crate) const NODES: usize = 400;
 
 fn theta_node(j: usize) -> f64 {
     FRAC_PI_2 * j as f64 / (NODES - 1) as f64
@@ -85,7 +85,7 @@ thread_local! {
 
 /// Runs `f` with the series at η, recomputed only when η changed since this thread's last call
 /// (a fit evaluates thousands of pixels at one η).
-pub fn with_series<R>(eta: f64, f: impl FnOnce(&Series) -> R) -> R {
+pub(crate) fn with_series<R>(eta: f64, f: impl FnOnce(&Series) -> R) -> R {
     CACHE.with(|cell| {
         let mut slot = cell.borrow_mut();
         let stale = !matches!(&*slot, Some((bits, _)) if *bits == eta.to_bits());

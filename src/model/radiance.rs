@@ -31,11 +31,11 @@ use serde::{Deserialize, Serialize};
 pub const N_PARAMS: usize = 15;
 /// Parameter indices into a gradient row.
 pub mod idx {
-    pub const SIGMA0: usize = 0; // .. 3
-    pub const ALBEDO: usize = 3; // .. 6
+    pub(crate) const SIGMA0: usize = 0; // .. 3
+    pub(crate) const ALBEDO: usize = 3; // .. 6
     pub const ETA: usize = 6;
-    pub const KS: usize = 7;
-    pub const ALPHA: usize = 8;
+    pub(crate) const KS: usize = 7;
+    pub(crate) const ALPHA: usize = 8;
     pub const AZIMUTH: usize = 9;
     pub const ELEVATION: usize = 10;
     pub const SIGMA_EXPONENT: usize = 11;
@@ -116,7 +116,7 @@ impl LightAngles {
     }
 
     /// ∂l/∂azimuth and ∂l/∂elevation.
-    pub fn jacobian(&self) -> (Vector3<f64>, Vector3<f64>) {
+    pub(crate) fn jacobian(&self) -> (Vector3<f64>, Vector3<f64>) {
         let (sa, ca) = self.azimuth.sin_cos();
         let (se, ce) = self.elevation.sin_cos();
         (
@@ -231,7 +231,7 @@ pub struct Model {
 }
 
 /// The reference radius of the extensions: the middle of the usual 15–35 mm sphere sets.
-pub const REFERENCE_RADIUS_MM: f64 = 25.0;
+pub(crate) const REFERENCE_RADIUS_MM: f64 = 25.0;
 
 impl Default for Model {
     fn default() -> Self {
@@ -251,7 +251,7 @@ pub type Gradient = [[f64; N_PARAMS]; 3];
 impl Model {
     /// The diffuse term's blur σ_c (radians) and albedo a_c at curvature κ = 1/r (1/mm), as in the
     /// module formula; κ = 0 is a flat surface (the limit r → ∞: σ = 0 unless q ≤ −1).
-    pub fn diffuse_terms(&self, m: &Material, kappa: f64) -> ([f64; 3], [f64; 3]) {
+    pub(crate) fn diffuse_terms(&self, m: &Material, kappa: f64) -> ([f64; 3], [f64; 3]) {
         // κ = 0 evaluated as the limit κ → 0⁺ (a tiny κ gives σ = 0 for q > −1, σ0 / r_ref for
         // q = −1 and ∞ below, without 0 · ∞).
         let kappa = kappa.max(1e-300);
@@ -272,7 +272,7 @@ impl Model {
 
     /// The blur profile at θ for a core width σ: one Gaussian or two, of the clamped cosine or
     /// of the transmitted irradiance (`entry_fresnel`, its `d_param` then ∂/∂η).
-    pub fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
+    pub(crate) fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
         let (w, s, conv) = (m.kernel_weight, m.kernel_ratio, self.convolution);
         if self.entry_fresnel {
             entry::with_series(m.eta, |series| {

@@ -82,7 +82,7 @@ pub fn lobe(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> LobeEva
 }
 
 /// The value of [`lobe`] alone, without derivatives (the renderer's inner loop).
-pub fn lobe_value(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> f64 {
+pub(crate) fn lobe_value(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> f64 {
     if nl <= 0.0 || nv <= 0.0 || lv <= -1.0 + 1e-12 {
         return 0.0;
     }

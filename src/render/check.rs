@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Icosphere subdivision level of the check (81 920 triangles).
-pub const LEVEL: u32 = 6;
+pub(crate) const LEVEL: u32 = 6;
 
 /// One sphere's comparison.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -128,7 +128,7 @@ pub fn compare(
 
 /// Every sphere of the fit's session (`fit`, read from `fit_path`), as the detector placed it
 /// (needs a perspective session: intrinsics and detections.json with sphere centres).
-pub fn check_fit(
+pub(crate) fn check_fit(
     fit: &crate::formats::fit::FitFile,
     fit_path: &Path,
     fm: &FitMaterial,

@@ -192,7 +192,7 @@ pub fn prepare(path: &Path, unit: Unit, object_size_mm: Option<f64>) -> Result<P
 }
 
 /// The default exposure: a flat surface facing the light, seen head-on, at 0.8 of full scale.
-pub fn default_exposure(lut: &Lut, eta: f64) -> f64 {
+pub(crate) fn default_exposure(lut: &Lut, eta: f64) -> f64 {
     let d = lut.sample(1.0, 0.0);
     let peak = d.iter().fold(0.0f32, |a, &b| a.max(b)) as f64
         * crate::model::fresnel::transmission(1.0, eta);

@@ -23,14 +23,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub const SCHEMA: &str = "workbench.lut/1";
+pub(crate) const SCHEMA: &str = "workbench.lut/1";
 
 /// κ_max over the highest measured curvature 1 / r_min: the table reaches three times the smallest
 /// sphere's blur (beyond it a render clamps).
-pub const KAPPA_MAX_FACTOR: f64 = 3.0;
+pub(crate) const KAPPA_MAX_FACTOR: f64 = 3.0;
 
 /// Table sizes (n_cos × n_kappa nodes) [`choose`] tries, smallest first.
-pub const SIZES: [(usize, usize); 6] = [
+pub(crate) const SIZES: [(usize, usize); 6] = [
     (33, 17),
     (65, 33),
     (129, 65),
@@ -87,12 +87,12 @@ impl Lut {
     }
 
     /// N·L of column i.
-    pub fn cos_at(&self, i: usize) -> f64 {
+    pub(crate) fn cos_at(&self, i: usize) -> f64 {
         -1.0 + 2.0 * i as f64 / (self.n_cos - 1) as f64
     }
 
     /// κ of row j (1/mm).
-    pub fn kappa_at(&self, j: usize) -> f64 {
+    pub(crate) fn kappa_at(&self, j: usize) -> f64 {
         self.kappa_max * j as f64 / (self.n_kappa - 1) as f64
     }
 
@@ -128,7 +128,7 @@ impl Lut {
     }
 
     /// The table as 16-bit values, `value / scale · 65535` rounded, rows top (κ = 0) to bottom.
-    pub fn to_u16(&self, scale: f64) -> Vec<u16> {
+    pub(crate) fn to_u16(&self, scale: f64) -> Vec<u16> {
         self.values
             .iter()
             .flat_map(|v| v.iter())
@@ -155,7 +155,11 @@ pub struct InterpolationError {
 
 /// Compare the table with the closed form at every cell's centre and the midpoints of its lower
 /// and left edges, where bilinear interpolation is furthest from its nodes.
-pub fn interpolation_error(lut: &Lut, model: &Model, material: &Material) -> InterpolationError {
+pub(crate) fn interpolation_error(
+    lut: &Lut,
+    model: &Model,
+    material: &Material,
+) -> InterpolationError {
     let du = 1.0 / (lut.n_cos - 1) as f64;
     let dv = 1.0 / (lut.n_kappa - 1) as f64;
     let per_row: Vec<(f64, f64, f64, f64, usize)> = (0..lut.n_kappa - 1)
@@ -208,7 +212,7 @@ pub type Tried = ((usize, usize), f64);
 /// The smallest table of [`SIZES`] whose largest error is within `tolerance` of its peak (the
 /// largest size when none is), with its measured error and every size tried with its relative
 /// error.
-pub fn choose(
+pub(crate) fn choose(
     model: &Model,
     material: &Material,
     kappa_max: f64,
@@ -236,7 +240,7 @@ pub struct FitMaterial {
 }
 
 impl FitMaterial {
-    pub fn from_fit(fit: &FitFile, file: &Path) -> Result<FitMaterial> {
+    pub(crate) fn from_fit(fit: &FitFile, file: &Path) -> Result<FitMaterial> {
         fit.validate(file)?;
         let radii: Vec<f64> = fit.rmse.spheres.iter().map(|s| s.radius_mm).collect();
         let (lo, hi) = radii
@@ -276,7 +280,7 @@ impl FitMaterial {
 }
 
 /// Read and check `fit.json`.
-pub fn read_fit(path: &Path) -> Result<(FitFile, FitMaterial)> {
+pub(crate) fn read_fit(path: &Path) -> Result<(FitFile, FitMaterial)> {
     let fit: FitFile = crate::formats::output::read_json(path)?;
     let fm = FitMaterial::from_fit(&fit, path)?;
     Ok((fit, fm))
@@ -311,7 +315,7 @@ pub struct LutJson {
 }
 
 /// The three output paths of `--out <stem>` (an extension .png/.exr/.json is dropped).
-pub fn output_paths(out: &Path) -> [PathBuf; 3] {
+pub(crate) fn output_paths(out: &Path) -> [PathBuf; 3] {
     let stem = match out.extension().and_then(|e| e.to_str()) {
         Some("png" | "exr" | "json") => out.with_extension(""),
         _ => out.to_path_buf(),

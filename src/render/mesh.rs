@@ -46,10 +46,10 @@ pub struct Mesh {
 }
 
 /// One-ring smoothing rounds applied to the raw curvature estimate.
-pub const SMOOTHING_ROUNDS: usize = 2;
+pub(crate) const SMOOTHING_ROUNDS: usize = 2;
 
 /// Largest mesh accepted (vertices or triangles).
-pub const MAX_ELEMENTS: usize = 50_000_000;
+pub(crate) const MAX_ELEMENTS: usize = 50_000_000;
 
 impl Mesh {
     /// Build from positions (mm) and triangles: checks indices and values, drops degenerate
@@ -295,7 +295,7 @@ impl Mesh {
 
 /// The volume a closed mesh encloses, positive when its triangles wind counter-clockwise seen
 /// from outside (for an open mesh, of the cone from the origin over it).
-pub fn signed_volume(positions: &[Vector3<f64>], triangles: &[[u32; 3]]) -> f64 {
+pub(crate) fn signed_volume(positions: &[Vector3<f64>], triangles: &[[u32; 3]]) -> f64 {
     triangles
         .iter()
         .map(|t| {
@@ -307,7 +307,10 @@ pub fn signed_volume(positions: &[Vector3<f64>], triangles: &[[u32; 3]]) -> f64 
 }
 
 /// Angle-weighted vertex normals (orientation from the triangles' winding).
-pub fn vertex_normals(positions: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Vec<Vector3<f64>> {
+pub(crate) fn vertex_normals(
+    positions: &[Vector3<f64>],
+    triangles: &[[u32; 3]],
+) -> Vec<Vector3<f64>> {
     let mut acc = vec![Vector3::zeros(); positions.len()];
     for t in triangles {
         let p = t.map(|i| positions[i as usize]);

@@ -53,7 +53,7 @@ impl Pinhole {
     }
 
     /// The smaller half field of view (radians).
-    pub fn half_fov(&self) -> f64 {
+    pub(crate) fn half_fov(&self) -> f64 {
         let hx = (0.5 * self.width as f64 / self.fx).atan();
         let hy = (0.5 * self.height as f64 / self.fy).atan();
         hx.min(hy)
@@ -104,7 +104,7 @@ impl Scene {
     }
 
     /// p_camera = R (p − eye), n_camera = R n.
-    pub fn transformed(
+    pub(crate) fn transformed(
         mesh: &Mesh,
         curvature: &[f64],
         r: &Matrix3<f64>,
@@ -153,7 +153,7 @@ pub enum Samples {
 
 impl Samples {
     /// Offsets from the pixel centre.
-    pub fn offsets(self) -> Vec<[f32; 2]> {
+    pub(crate) fn offsets(self) -> Vec<[f32; 2]> {
         match self {
             Samples::One => vec![[0.0, 0.0]],
             Samples::Four => vec![
@@ -592,7 +592,7 @@ pub enum Tone {
 }
 
 /// Pixel values in [0, 1] from radiance × exposure.
-pub fn tone_map(img: &Image, exposure: f64, tone: Tone) -> Vec<f64> {
+pub(crate) fn tone_map(img: &Image, exposure: f64, tone: Tone) -> Vec<f64> {
     img.rgb
         .iter()
         .flat_map(|p| p.iter())

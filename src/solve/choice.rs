@@ -30,7 +30,7 @@ pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Redu
 /// predicts that radius's pixels; the candidate with the lowest mean
 /// relative RMSE (the simplest within 1% of it) wins if it beats the plain model by more than 2%
 /// of its error.
-pub fn choose_extensions(
+pub(crate) fn choose_extensions(
     opts: &Options,
     l: &Loaded,
     fitted: &[&SphereData],

@@ -3,7 +3,7 @@
 use super::*;
 
 /// The jackknife's refits pool pixels in cells of this many × 0.25° at least.
-pub const JACKKNIFE_CELLS: u32 = 8;
+pub(crate) const JACKKNIFE_CELLS: u32 = 8;
 
 /// The jackknife spread of each parameter (0 where not free in the full fit) and its record.
 pub struct Jackknife {

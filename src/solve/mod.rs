@@ -31,11 +31,12 @@ mod outcome;
 mod replot;
 mod summary;
 
-pub use choice::choose_extensions;
+use choice::choose_extensions;
 use choice::setup;
 use file::{fit_file, predictions};
 use jackknife::combine_predictions;
-pub use jackknife::{jackknife, Jackknife, JACKKNIFE_CELLS};
+pub use jackknife::jackknife;
+use jackknife::Jackknife;
 use load::{cached, load_inspected};
 pub use load::{fingerprint, load, Loaded};
 use outcome::{joint_outcome, paper_outcome, Outcome};
@@ -43,7 +44,7 @@ pub use replot::replot;
 pub use summary::summary;
 
 /// Pixels per sphere used for RMSE and predictions (every k-th beyond this).
-pub const PREDICT_PIXELS: usize = 200_000;
+pub(crate) const PREDICT_PIXELS: usize = 200_000;
 
 /// Model extensions: the default, none, the ones named, or chosen by held-out error.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,7 +62,7 @@ pub enum ExtensionChoice {
 
 /// Distinct radii the default extension needs (b is an exponential in 1/r: two radii fix the
 /// albedo and b, a third is what tests them).
-pub const DEFAULT_EXTENSION_RADII: usize = 3;
+pub(crate) const DEFAULT_EXTENSION_RADII: usize = 3;
 
 #[derive(Clone, Debug)]
 pub struct Options {

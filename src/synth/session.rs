@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub const TRUTH_SCHEMA: &str = "workbench.truth/1";
+pub(crate) const TRUTH_SCHEMA: &str = "workbench.truth/1";
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -56,10 +56,10 @@ pub enum Backdrop {
 }
 
 /// The table's diffuse albedo (π·radiance / irradiance) and the wall's level behind it.
-pub const TABLE_ALBEDO: f64 = 0.3;
-pub const WALL_LEVEL: f64 = 0.10;
+pub(crate) const TABLE_ALBEDO: f64 = 0.3;
+pub(crate) const WALL_LEVEL: f64 = 0.10;
 /// The stand's pin radius (mm).
-pub const PIN_RADIUS_MM: f64 = 1.5;
+pub(crate) const PIN_RADIUS_MM: f64 = 1.5;
 
 /// The nearest hit of a camera ray `d` on a sphere's pin (a vertical cylinder under it): the
 /// distance and the pin's outward normal there.

@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-pub const TRUTH_SCHEMA: &str = "workbench.pbr-truth/1";
+pub(crate) const TRUTH_SCHEMA: &str = "workbench.pbr-truth/1";
 
 /// The scattering medium: extinction (1/mm, one for all channels) and single-scattering albedo.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -51,7 +51,7 @@ pub struct Medium {
 
 impl Medium {
     /// Diffusion length 1/√(3 σa σt) per channel (isotropic phase: σt′ = σt), in mm.
-    pub fn diffusion_length_mm(&self) -> [f64; 3] {
+    pub(crate) fn diffusion_length_mm(&self) -> [f64; 3] {
         self.albedo
             .map(|a| 1.0 / (3.0 * (1.0 - a) * self.sigma_t * self.sigma_t).sqrt())
     }
