@@ -6,10 +6,11 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::path::Path;
+use workbench::camera::Camera;
 use workbench::model::{LightAngles, Model};
 use workbench::render::job::{prepare, shader, table, TableSize};
 use workbench::render::lut::FitMaterial;
-use workbench::render::raster::{render, render_into, Pinhole, Samples, Scene, Shading, View};
+use workbench::render::raster::{render, render_into, Samples, Scene, Shading, View};
 use workbench::synth::session::SessionConfig;
 
 fn bench_bunny(c: &mut Criterion) {
@@ -30,7 +31,7 @@ fn bench_bunny(c: &mut Criterion) {
     };
     let t = table(&fm, TableSize::default(), None).unwrap();
     let prep = prepare(&path, workbench::render::mesh::Unit::M, None).unwrap();
-    let cam = Pinhole::from_fov(1280, 720, 30.0);
+    let cam = Camera::from_fov(1280, 720, 30.0);
     let scene = Scene::framed(&prep.mesh, &prep.curvature, &View::default(), &cam);
     let mut g = c.benchmark_group("bunny_1280x720");
     g.sample_size(30);

@@ -136,6 +136,41 @@ impl Camera {
         }
     }
 
+    /// An ideal camera (no distortion) as the renderer uses: square pixels, the principal point
+    /// at the centre, a horizontal field of view in degrees.
+    pub fn from_fov(width: u32, height: u32, fov_deg: f64) -> Camera {
+        let f = 0.5 * width as f64 / (0.5 * fov_deg.to_radians()).tan();
+        Camera {
+            fx: f,
+            fy: f,
+            cx: 0.5 * (width as f64 - 1.0),
+            cy: 0.5 * (height as f64 - 1.0),
+            distortion: Distortion::default(),
+            image_size: [width, height],
+        }
+    }
+
+    /// The same camera without its distortion: the camera of ideal (undistorted) pixels, in which
+    /// detections.json gives the outlines.
+    pub fn ideal(&self) -> Camera {
+        Camera {
+            distortion: Distortion::default(),
+            ..*self
+        }
+    }
+
+    /// Unit ray through the ideal (undistorted) pixel (x, y); the distortion is not applied.
+    pub fn ideal_ray(&self, x: f64, y: f64) -> Vector3<f64> {
+        Vector3::new((x - self.cx) / self.fx, (y - self.cy) / self.fy, 1.0).normalize()
+    }
+
+    /// The smaller half field of view (radians).
+    pub(crate) fn half_fov(&self) -> f64 {
+        let hx = (0.5 * self.width() as f64 / self.fx).atan();
+        let hy = (0.5 * self.height() as f64 / self.fy).atan();
+        hx.min(hy)
+    }
+
     pub fn width(&self) -> u32 {
         self.image_size[0]
     }

@@ -22,21 +22,13 @@
 //!    crossing the band) are down-weighted by their own residual.
 
 use crate::camera::outline::{Outline, Projection};
+use crate::formats::photo::Raster;
 use nalgebra::{Matrix3, Vector2, Vector3};
 
-/// A single-channel image (row-major).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Plane {
-    pub width: u32,
-    pub height: u32,
-    pub data: Vec<f32>,
-}
+/// A single-channel floating-point image (luminance).
+pub type Plane = Raster<f32>;
 
-impl Plane {
-    pub fn at(&self, x: u32, y: u32) -> f32 {
-        self.data[y as usize * self.width as usize + x as usize]
-    }
-
+impl Raster<f32> {
     /// Bilinear interpolation at a pixel position (pixel centres at integers); clamped at the
     /// border.
     pub fn sample(&self, p: Vector2<f64>) -> f64 {

@@ -126,13 +126,24 @@ mod tests {
     }
 }
 
-/// An 8-bit greyscale image.
+/// A single-channel image of any pixel type, row-major: the one grid the stages share (8-bit grey
+/// for the calibration, luminance for the detector). A photo in colour is [`LinearRgb`] (its
+/// clipped pixels flagged), a render `render::raster::Image` (its coverage kept).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Gray8 {
+pub struct Raster<T> {
     pub width: u32,
     pub height: u32,
-    pub data: Vec<u8>,
+    pub data: Vec<T>,
 }
+
+impl<T: Copy> Raster<T> {
+    pub fn at(&self, x: u32, y: u32) -> T {
+        self.data[y as usize * self.width as usize + x as usize]
+    }
+}
+
+/// An 8-bit greyscale image.
+pub type Gray8 = Raster<u8>;
 
 /// Decode any supported image (JPEG, PNG, TIFF; 8 or 16 bit) to 8-bit grey, with its EXIF
 /// orientation applied.

@@ -9,11 +9,12 @@
 //! interpolation and the renderer's f32 arithmetic.
 
 use crate::camera::sphere::Sphere;
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::model::{Geometry, Params};
 use crate::render::lut::{FitMaterial, Lut};
 use crate::render::mesh::shapes;
-use crate::render::raster::{render, Image, Pinhole, Samples, Scene, Shader, Shading};
+use crate::render::raster::{render, Image, Samples, Scene, Shader, Shading};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -38,13 +39,13 @@ pub struct SphereComparison {
 }
 
 /// The solver's predicted image of a sphere: the model at every pixel centre whose ray hits it.
-pub fn predict(fm: &FitMaterial, params: &Params, cam: &Pinhole, sphere: &Sphere) -> Image {
-    let (w, h) = (cam.width as usize, cam.height as usize);
+pub fn predict(fm: &FitMaterial, params: &Params, cam: &Camera, sphere: &Sphere) -> Image {
+    let (w, h) = (cam.width() as usize, cam.height() as usize);
     let mut rgb = vec![[0.0f32; 3]; w * h];
     let mut coverage = vec![0.0f32; w * h];
     for j in 0..h {
         for i in 0..w {
-            let d = cam.ray(i as f64, j as f64);
+            let d = cam.ideal_ray(i as f64, j as f64);
             if let Some(sp) = sphere.surface_at(&d) {
                 let g = Geometry {
                     normal: sp.normal,
@@ -58,8 +59,8 @@ pub fn predict(fm: &FitMaterial, params: &Params, cam: &Pinhole, sphere: &Sphere
         }
     }
     Image {
-        width: cam.width,
-        height: cam.height,
+        width: cam.width(),
+        height: cam.height(),
         rgb,
         coverage,
     }
@@ -70,7 +71,7 @@ pub fn predict(fm: &FitMaterial, params: &Params, cam: &Pinhole, sphere: &Sphere
 pub fn compare(
     fm: &FitMaterial,
     lut: &Lut,
-    cam: &Pinhole,
+    cam: &Camera,
     center: Vector3<f64>,
     radius_mm: f64,
 ) -> (SphereComparison, Image, Image) {
@@ -144,14 +145,7 @@ pub(crate) fn check_fit(
     })?;
     let det_path = session.with_file_name("detections.json");
     let det: crate::formats::detections::Detections = crate::formats::output::read_json(&det_path)?;
-    let pin = Pinhole {
-        fx: cam.fx,
-        fy: cam.fy,
-        cx: cam.cx,
-        cy: cam.cy,
-        width: cam.width(),
-        height: cam.height(),
-    };
+    let pin = cam.ideal();
     let mut out = Vec::new();
     for im in &det.images {
         for (index, s) in im.spheres.iter().enumerate() {

@@ -1,12 +1,13 @@
 //! `workbench render` and `workbench lut` as library calls: read the fit and the mesh, build the
 //! table, frame, render, tone-map and write (atomically).
 
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::model::LightAngles;
 use crate::render::check::{self, SphereComparison};
 use crate::render::lut::{self, FitMaterial, InterpolationError, Lut};
 use crate::render::mesh::{Mesh, Unit};
-use crate::render::raster::{self, Image, Pinhole, Samples, Scene, Shader, Shading, Tone, View};
+use crate::render::raster::{self, Image, Samples, Scene, Shader, Shading, Tone, View};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -270,7 +271,7 @@ pub fn run(o: &RenderOptions) -> Result<RenderReport> {
         },
         None => fm.light,
     };
-    let cam = Pinhole::from_fov(o.width, o.height, o.fov_deg);
+    let cam = Camera::from_fov(o.width, o.height, o.fov_deg);
     let scene = Scene::framed(&prep.mesh, &prep.curvature, &o.view, &cam);
     let sh = shader(&fm, &table.lut, light, o.shading);
     let t2 = Instant::now();

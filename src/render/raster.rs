@@ -21,49 +21,12 @@
 //! something nearer always hides them; through a hole in an open mesh the background shows instead
 //! of the inside.
 
+use crate::camera::Camera;
 use crate::model::specular;
 use crate::render::lut::Lut;
 use crate::render::mesh::Mesh;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
-
-/// A pinhole camera.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pinhole {
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Pinhole {
-    /// Square pixels, principal point at the centre, horizontal field of view in degrees.
-    pub fn from_fov(width: u32, height: u32, fov_deg: f64) -> Pinhole {
-        let f = 0.5 * width as f64 / (0.5 * fov_deg.to_radians()).tan();
-        Pinhole {
-            fx: f,
-            fy: f,
-            cx: 0.5 * (width as f64 - 1.0),
-            cy: 0.5 * (height as f64 - 1.0),
-            width,
-            height,
-        }
-    }
-
-    /// The smaller half field of view (radians).
-    pub(crate) fn half_fov(&self) -> f64 {
-        let hx = (0.5 * self.width as f64 / self.fx).atan();
-        let hy = (0.5 * self.height as f64 / self.fy).atan();
-        hx.min(hy)
-    }
-
-    /// Unit ray through image point (x, y).
-    pub fn ray(&self, x: f64, y: f64) -> Vector3<f64> {
-        Vector3::new((x - self.cx) / self.fx, (y - self.cy) / self.fy, 1.0).normalize()
-    }
-}
 
 /// Where the camera looks from: it orbits the mesh's bounding sphere.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -120,7 +83,7 @@ impl Scene {
     }
 
     /// The mesh seen from `view` (mesh coordinates y up), framed in `cam`.
-    pub fn framed(mesh: &Mesh, curvature: &[f64], view: &View, cam: &Pinhole) -> Scene {
+    pub fn framed(mesh: &Mesh, curvature: &[f64], view: &View, cam: &Camera) -> Scene {
         let (centre, radius) = mesh.bounds();
         let (az, el) = (
             view.azimuth_deg.to_radians(),
@@ -287,8 +250,8 @@ struct Setup {
     bbox: [i32; 4],
 }
 
-fn setup(scene: &Scene, cam: &Pinhole, t: &[u32; 3]) -> Option<Setup> {
-    let (w, h) = (cam.width as i32, cam.height as i32);
+fn setup(scene: &Scene, cam: &Camera, t: &[u32; 3]) -> Option<Setup> {
+    let (w, h) = (cam.width() as i32, cam.height() as i32);
     let mut x = [0.0f32; 3];
     let mut y = [0.0f32; 3];
     let mut iz = [0.0f32; 3];
@@ -363,10 +326,10 @@ impl Setup {
 }
 
 /// Render `scene` through `cam`.
-pub fn render(scene: &Scene, cam: &Pinhole, shader: &Shader, samples: Samples) -> Image {
+pub fn render(scene: &Scene, cam: &Camera, shader: &Shader, samples: Samples) -> Image {
     let mut img = Image {
-        width: cam.width,
-        height: cam.height,
+        width: cam.width(),
+        height: cam.height(),
         rgb: Vec::new(),
         coverage: Vec::new(),
     };
@@ -378,14 +341,14 @@ pub fn render(scene: &Scene, cam: &Pinhole, shader: &Shader, samples: Samples) -
 /// interactive viewer, and what `benches/render.rs` times.
 pub fn render_into(
     scene: &Scene,
-    cam: &Pinhole,
+    cam: &Camera,
     shader: &Shader,
     samples: Samples,
     img: &mut Image,
 ) {
-    let (w, h) = (cam.width as usize, cam.height as usize);
-    img.width = cam.width;
-    img.height = cam.height;
+    let (w, h) = (cam.width() as usize, cam.height() as usize);
+    img.width = cam.width();
+    img.height = cam.height();
     img.rgb.resize(w * h, [0.0; 3]);
     img.coverage.resize(w * h, 0.0);
     let setups: Vec<Option<Setup>> = scene
@@ -645,7 +608,7 @@ mod tests {
     #[test]
     fn framed_mesh_fits_the_image() {
         let m = crate::render::mesh::shapes::icosphere(Vector3::new(10.0, 5.0, -3.0), 7.0, 2);
-        let cam = Pinhole::from_fov(320, 240, 40.0);
+        let cam = Camera::from_fov(320, 240, 40.0);
         for (az, el) in [(0.0, 0.0), (90.0, 30.0), (200.0, -60.0)] {
             let view = View {
                 azimuth_deg: az,

@@ -5,12 +5,13 @@ use crate::common;
 use common::wb;
 use nalgebra::Vector3;
 use std::path::Path;
+use workbench::camera::Camera;
 use workbench::model::{LightAngles, Model};
 use workbench::render::check::{compare, predict};
 use workbench::render::job::{shader, table, TableSize};
 use workbench::render::lut::{FitMaterial, Lut};
 use workbench::render::mesh::{shapes, Mesh, Unit};
-use workbench::render::raster::{render, Pinhole, Samples, Scene, Shading};
+use workbench::render::raster::{render, Samples, Scene, Shading};
 use workbench::synth::session::SessionConfig;
 
 fn wax() -> FitMaterial {
@@ -31,7 +32,7 @@ fn wax() -> FitMaterial {
 fn ideal_sphere_reproduces_the_models_image() {
     let fm = wax();
     let t = table(&fm, TableSize::default(), None).unwrap();
-    let cam = Pinhole::from_fov(640, 480, 40.0);
+    let cam = Camera::from_fov(640, 480, 40.0);
     for (r, z) in [(35.0, 400.0), (15.0, 200.0), (5.0, 90.0)] {
         let (c, _, _) = compare(&fm, &t.lut, &cam, Vector3::new(8.0, -5.0, z), r);
         println!(
@@ -50,7 +51,7 @@ fn ideal_sphere_reproduces_the_models_image() {
 fn lambert_is_the_zero_blur_model() {
     let mut fm = wax();
     let t = table(&fm, TableSize::default(), None).unwrap();
-    let cam = Pinhole::from_fov(320, 240, 40.0);
+    let cam = Camera::from_fov(320, 240, 40.0);
     let centre = Vector3::new(0.0, 0.0, 150.0);
     let mesh = shapes::icosphere(centre, 20.0, 5);
     let k = mesh.curvature();
@@ -96,7 +97,7 @@ fn lambert_is_the_zero_blur_model() {
 fn silhouettes_are_antialiased() {
     let fm = wax();
     let t = table(&fm, TableSize::Fixed(129, 65), None).unwrap();
-    let cam = Pinhole::from_fov(320, 240, 40.0);
+    let cam = Camera::from_fov(320, 240, 40.0);
     let mesh = shapes::icosphere(Vector3::new(3.0, 2.0, 150.0), 20.0, 5);
     let k = mesh.curvature();
     let scene = Scene::new(&mesh, &k);
