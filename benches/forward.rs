@@ -57,6 +57,16 @@ fn bench_kernels(c: &mut Criterion) {
                     .sum::<f64>()
             })
         });
+        // The same from the table (value and both derivatives, as the closed form gives).
+        let table = workbench::model::table::Table::shared();
+        g.bench_function(format!("{name}_table"), |b| {
+            b.iter(|| {
+                thetas
+                    .iter()
+                    .map(|&t| table.eval(t, black_box(sigma)).value)
+                    .sum::<f64>()
+            })
+        });
     }
     let geo = samples(n);
     let model = Model::default();
@@ -72,6 +82,17 @@ fn bench_kernels(c: &mut Criterion) {
         b.iter(|| {
             geo.iter()
                 .map(|gm| model.radiance_with_gradient(black_box(&params), gm).1[0][0])
+                .sum::<f64>()
+        })
+    });
+    let closed = Model {
+        tabulated: false,
+        ..Model::default()
+    };
+    g.bench_function("model_rgb_with_gradient_closed_form", |b| {
+        b.iter(|| {
+            geo.iter()
+                .map(|gm| closed.radiance_with_gradient(black_box(&params), gm).1[0][0])
                 .sum::<f64>()
         })
     });
@@ -149,6 +170,26 @@ fn bench_normal_equations(c: &mut Criterion) {
             b.iter(|| pool.install(|| black_box(problem.normal_equations())))
         });
     }
+    // The closed-form CDRF instead of the table, one core: the table's gain on the hot path.
+    let closed = Problem {
+        model: Model {
+            tabulated: false,
+            ..model
+        },
+        obs: &obs,
+        free,
+        u: to_unbounded(&params.to_vec()),
+        priors: vec![],
+        history: None,
+        floor: false,
+    };
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    g.bench_function("1_threads_closed_form", |b| {
+        b.iter(|| one.install(|| black_box(closed.normal_equations())))
+    });
     g.finish();
 }
 

@@ -461,10 +461,16 @@ pub(crate) fn mixture(
     s: f64,
     source: Option<&Series>,
     conv: Convolution,
+    tabulated: bool,
 ) -> MixtureEval {
+    let table =
+        (tabulated && conv == Convolution::Wrapped).then(crate::model::table::Table::shared);
     let one = |sig: f64| match source {
         None => SeriesEval {
-            f: eval(theta, sig, conv),
+            f: match table {
+                Some(t) => t.eval(theta, sig),
+                None => eval(theta, sig, conv),
+            },
             d_param: 0.0,
         },
         Some(series) => eval_series(theta, sig, series, conv),

@@ -1,5 +1,5 @@
 //! The forward model, a pixel's radiance from the material, the light and the surface under it:
-//! the CDRF's blur ([`cdrf`]), the Fresnel transmissions ([`fresnel`], [`entry`]), the specular
+//! the CDRF's blur ([`cdrf`], tabulated for the fit in [`table`]), the Fresnel transmissions ([`fresnel`], [`entry`]), the specular
 //! lobe ([`specular`]) and their sum with its gradient ([`radiance`], whose items are re-exported
 //! here).
 
@@ -8,5 +8,6 @@ pub mod entry;
 pub mod fresnel;
 mod radiance;
 pub mod specular;
+pub mod table;
 
 pub use radiance::*;

@@ -6,6 +6,7 @@ pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Redu
     Setup {
         model: Model {
             entry_fresnel: opts.entry_transmission,
+            tabulated: opts.tabulated,
             ..Model::default()
         },
         light: l.light,

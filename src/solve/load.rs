@@ -230,7 +230,7 @@ pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant)
 /// The options that decide a fit's result (not where it is written, nor progress display).
 pub fn fingerprint(opts: &Options) -> String {
     format!(
-        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | baseline {}",
+        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | cdrf {} | baseline {}",
         env!("CARGO_PKG_VERSION"),
         opts.method,
         opts.holdout,
@@ -244,6 +244,7 @@ pub fn fingerprint(opts: &Options) -> String {
         opts.light_fit.name(),
         opts.jackknife,
         opts.entry_transmission,
+        if opts.tabulated { "table" } else { "closed form" },
         opts.baseline || opts.plots.is_some()
     )
 }

@@ -89,6 +89,9 @@ pub struct Options {
     /// Blur the irradiance transmitted into the medium (entry-side Fresnel) rather than the bare
     /// clamped cosine (docs/model.md; off by default, docs/uncertainty.md says why).
     pub entry_transmission: bool,
+    /// The CDRF from its table (the default) or the closed form (docs/model.md, "The tabulated
+    /// CDRF").
+    pub tabulated: bool,
     pub plots: Option<PathBuf>,
     /// Run the paper's baseline beside a joint fit (also when `plots` is set: its curves are drawn).
     pub baseline: bool,
@@ -113,6 +116,7 @@ impl Options {
             light_fit: LightFit::Prior,
             jackknife: true,
             entry_transmission: false,
+            tabulated: true,
             plots: None,
             baseline: false,
             quiet: true,

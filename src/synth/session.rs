@@ -499,6 +499,8 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     let model = Model {
         convolution: cfg.convolution,
         entry_fresnel: cfg.entry_transmission,
+        // Ground truth: the closed form, not the fit's table.
+        tabulated: false,
         ..Model::default()
     };
     let params = Params {

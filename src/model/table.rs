@@ -1,0 +1,159 @@
+//! The CDRF tabulated for the solver's hot path: the wrapped f(θ; σ) with ∂f/∂θ and ∂f/∂σ from
+//! a bicubic Hermite interpolant, whose derivatives are the exact derivatives of the interpolated
+//! value (consistent, as Levenberg–Marquardt needs). The closed form ([`crate::model::cdrf`]) is
+//! the reference it is built from and checked against (docs/model.md, "The tabulated CDRF").
+//!
+//! Coordinates: u = ln σ and τ = asinh((θ − π/2)/σ), both on uniform grids. τ puts the nodes
+//! where f bends: a spacing of a few hundredths of σ at the terminator, where a narrow blur
+//! rounds the clamped cosine's kink, growing to a few hundredths of a radian far from it. At
+//! each node the table holds F = f, ∂F/∂τ, ∂F/∂u and ∂²F/∂τ∂u, from the closed form's value and
+//! derivatives (the cross derivative by a central difference in u of the exact ∂F/∂τ).
+//! Outside σ ∈ [[`SIGMA_MIN`], [`SIGMA_MAX`]] the closed form is evaluated instead.
+
+use crate::model::cdrf::{self, CdrfEval, Convolution};
+use std::f64::consts::FRAC_PI_2;
+use std::sync::OnceLock;
+
+/// The blur widths tabulated (radians): σ0/r for σ0 ≥ 0.05 mm on spheres up to 50 mm, and wider
+/// than the wrapped form needs (f is within 1e-7 of its constant mean beyond 4).
+pub const SIGMA_MIN: f64 = 1e-3;
+pub const SIGMA_MAX: f64 = 4.0;
+/// Nodes in τ and in u (measured error: docs/model.md, "The tabulated CDRF").
+const N_TAU: usize = 513;
+const N_U: usize = 385;
+
+/// The table: `nodes[j * N_TAU + i]` is [F, F_τ, F_u, F_τu] at (τ_i, u_j).
+pub struct Table {
+    nodes: Vec<[f64; 4]>,
+    tau_max: f64,
+    h_tau: f64,
+    u_min: f64,
+    h_u: f64,
+}
+
+/// θ at (τ, u) and its derivatives ∂θ/∂τ and ∂θ/∂u.
+fn theta_of(tau: f64, u: f64) -> (f64, f64, f64) {
+    let sigma = u.exp();
+    let (sh, ch) = (tau.sinh(), tau.cosh());
+    (FRAC_PI_2 + sigma * sh, sigma * ch, sigma * sh)
+}
+
+/// F_τ at (τ, u) from the closed form.
+fn f_tau(tau: f64, u: f64) -> f64 {
+    let (theta, th_tau, _) = theta_of(tau, u);
+    cdrf::eval(theta, u.exp(), Convolution::Wrapped).d_theta * th_tau
+}
+
+impl Table {
+    /// Build the table (about 0.4 M closed-form evaluations, in parallel).
+    pub fn build() -> Table {
+        use rayon::prelude::*;
+        let tau_max = (FRAC_PI_2 / SIGMA_MIN).asinh();
+        let h_tau = 2.0 * tau_max / (N_TAU - 1) as f64;
+        let u_min = SIGMA_MIN.ln();
+        let h_u = (SIGMA_MAX.ln() - u_min) / (N_U - 1) as f64;
+        let du = 1e-5;
+        let nodes = (0..N_U * N_TAU)
+            .into_par_iter()
+            .map(|k| {
+                let (i, j) = (k % N_TAU, k / N_TAU);
+                let tau = -tau_max + i as f64 * h_tau;
+                let u = u_min + j as f64 * h_u;
+                let sigma = u.exp();
+                let (theta, th_tau, th_u) = theta_of(tau, u);
+                let e = cdrf::eval(theta, sigma, Convolution::Wrapped);
+                let cross = (f_tau(tau, u + du) - f_tau(tau, u - du)) / (2.0 * du);
+                [
+                    e.value,
+                    e.d_theta * th_tau,
+                    e.d_theta * th_u + e.d_sigma * sigma,
+                    cross,
+                ]
+            })
+            .collect();
+        Table {
+            nodes,
+            tau_max,
+            h_tau,
+            u_min,
+            h_u,
+        }
+    }
+
+    /// The table every caller shares, built on first use.
+    pub fn shared() -> &'static Table {
+        static TABLE: OnceLock<Table> = OnceLock::new();
+        TABLE.get_or_init(Table::build)
+    }
+
+    /// f, ∂f/∂θ and ∂f/∂σ (∂²f/∂θ² as (∂f/∂σ)/σ, the diffusion equation's) at θ ∈ [0, π]; the
+    /// closed form outside the tabulated σ.
+    pub fn eval(&self, theta: f64, sigma: f64) -> CdrfEval {
+        if !(SIGMA_MIN..=SIGMA_MAX).contains(&sigma)
+            || !(0.0..=std::f64::consts::PI).contains(&theta)
+        {
+            return cdrf::eval(theta, sigma, Convolution::Wrapped);
+        }
+        let u = sigma.ln();
+        let z = (theta - FRAC_PI_2) / sigma;
+        let r = (z * z + 1.0).sqrt();
+        let tau = z.asinh();
+        // ∂τ/∂θ = 1/(σ√(1+z²)), ∂τ/∂σ = −z/(σ√(1+z²)).
+        let tau_theta = 1.0 / (sigma * r);
+        let tau_sigma = -z * tau_theta;
+        let x = (tau + self.tau_max) / self.h_tau;
+        let y = (u - self.u_min) / self.h_u;
+        let i = (x.floor() as usize).min(N_TAU - 2);
+        let j = (y.floor() as usize).min(N_U - 2);
+        let (s, t) = (x - i as f64, y - j as f64);
+        // Cubic Hermite basis and derivatives in s and t.
+        let basis = |s: f64| {
+            let (s2, s3) = (s * s, s * s * s);
+            (
+                [
+                    2.0 * s3 - 3.0 * s2 + 1.0,
+                    s3 - 2.0 * s2 + s,
+                    -2.0 * s3 + 3.0 * s2,
+                    s3 - s2,
+                ],
+                [
+                    6.0 * s2 - 6.0 * s,
+                    3.0 * s2 - 4.0 * s + 1.0,
+                    -6.0 * s2 + 6.0 * s,
+                    3.0 * s2 - 2.0 * s,
+                ],
+            )
+        };
+        let (hs, ds) = basis(s);
+        let (ht, dt) = basis(t);
+        let (a, b) = (self.h_tau, self.h_u);
+        let (mut v, mut v_s, mut v_t) = (0.0, 0.0, 0.0);
+        for (cj, (wt, wdt, wt1, wdt1)) in [
+            (0, (ht[0], dt[0], ht[1], dt[1])),
+            (1, (ht[2], dt[2], ht[3], dt[3])),
+        ] {
+            let row = (j + cj) * N_TAU + i;
+            for (ci, (ws, wds, ws1, wds1)) in [
+                (0, (hs[0], ds[0], hs[1], ds[1])),
+                (1, (hs[2], ds[2], hs[3], ds[3])),
+            ] {
+                let n = &self.nodes[row + ci];
+                // F, F_τ·h_τ, F_u·h_u, F_τu·h_τ·h_u against H(s)·H(t) and its s and t derivatives.
+                let (f, ft, fu, ftu) = (n[0], n[1] * a, n[2] * b, n[3] * a * b);
+                v += f * ws * wt + ft * ws1 * wt + fu * ws * wt1 + ftu * ws1 * wt1;
+                v_s += f * wds * wt + ft * wds1 * wt + fu * wds * wt1 + ftu * wds1 * wt1;
+                v_t += f * ws * wdt + ft * ws1 * wdt + fu * ws * wdt1 + ftu * ws1 * wdt1;
+            }
+        }
+        // Back to θ and σ: ∂/∂τ = (∂/∂s)/h_τ, ∂/∂u = (∂/∂t)/h_u, u = ln σ.
+        let (f_tau, f_u) = (v_s / a, v_t / b);
+        let d_theta = f_tau * tau_theta;
+        let d_sigma = f_tau * tau_sigma + f_u / sigma;
+        CdrfEval {
+            value: v,
+            d_theta,
+            d2_theta: d_sigma / sigma,
+            d_sigma,
+        }
+    }
+}
