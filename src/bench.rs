@@ -200,6 +200,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             });
             pb.inc(1);
         }
+        if rows.iter().all(|r| r.stage != "kernel") {
+            rows.extend(kernel_rows(&dir, &d.name)?);
+        }
     }
     pb.finish_and_clear();
     let report = BenchReport {
@@ -213,6 +216,73 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     crate::formats::output::write_bytes(&opts.out.join("report.md"), markdown(&report).as_bytes())?;
     error_vs_time(&report).save(&opts.out.join("error-vs-time"))?;
     Ok(report)
+}
+
+/// The solver's kernel on a session's pixels (every one, at its fit): the model, its gradient
+/// and the normal equations JᵀJ, Jᵀr accumulated, on one core, with the tabulated CDRF and with
+/// the closed form; the table's error is the largest difference of JᵀJ relative to its largest
+/// entry. Seconds are per evaluation (the best of five).
+fn kernel_rows(dir: &Path, name: &str) -> Result<Vec<Row>> {
+    use crate::fit::solver::{to_unbounded, Obs, Problem};
+    use crate::model::{Model, N_PARAMS};
+    let l = solve::load(&Options::new(dir))?;
+    let fit: crate::formats::fit::FitFile =
+        crate::formats::output::read_json(&dir.join("fit-auto.json"))?;
+    let obs: Vec<Obs> = l
+        .spheres
+        .iter()
+        .flat_map(|s| s.obs.iter().cloned())
+        .collect();
+    let mut free = [false; N_PARAMS];
+    free[..11].fill(true);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| Error::Argument(format!("thread pool: {e}")))?;
+    let run = |tabulated: bool| {
+        let problem = Problem {
+            model: Model {
+                tabulated,
+                ..fit.model()
+            },
+            obs: &obs,
+            free,
+            u: to_unbounded(&fit.params().to_vec()),
+            priors: vec![],
+            history: None,
+            floor: false,
+        };
+        let mut best = f64::INFINITY;
+        let mut ne = None;
+        for _ in 0..5 {
+            let t = Instant::now();
+            ne = Some(pool.install(|| problem.normal_equations()));
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        (best, ne.expect("five runs").jtj)
+    };
+    let (t_closed, closed) = run(false);
+    let (t_table, table) = run(true);
+    let scale = closed.amax().max(1e-300);
+    let row = |setting: &str, seconds: f64, error: f64| Row {
+        stage: "kernel".into(),
+        data: name.into(),
+        setting: setting.into(),
+        seconds,
+        error,
+        error_unit: "JᵀJ rel.".into(),
+        light_error_deg: None,
+        decode_s: None,
+        observations: Some(obs.len()),
+    };
+    Ok(vec![
+        row("closed-form CDRF, 1 core", t_closed, 0.0),
+        row(
+            "tabulated CDRF, 1 core",
+            t_table,
+            (&table - &closed).amax() / scale,
+        ),
+    ])
 }
 
 #[cfg(feature = "opencv")]
@@ -289,17 +359,36 @@ pub fn markdown(r: &BenchReport) -> String {
     for row in &r.rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.2} | {:.3} {} | {} | {} |",
+            "| {} | {} | {} | {:.2} | {} {} | {} | {} |",
             row.stage,
             row.data,
             row.setting,
             row.seconds,
-            row.error,
+            if row.stage == "kernel" {
+                format!("{:.1e}", row.error)
+            } else {
+                format!("{:.3}", row.error)
+            },
             row.error_unit,
             row.light_error_deg
                 .map_or(String::new(), |e| format!("{e:.3}")),
             row.observations.map_or(String::new(), |n| n.to_string())
         );
+    }
+    for k in r.rows.iter().filter(|x| x.stage == "kernel") {
+        if let Some(n) = k.observations {
+            let _ = writeln!(
+                s,
+                "{}kernel, {}: {:.2} M observations/s",
+                if k.setting.starts_with("closed") {
+                    "\n"
+                } else {
+                    ""
+                },
+                k.setting,
+                n as f64 / k.seconds / 1e6
+            );
+        }
     }
     s.push_str(
         "\n| data | solve (auto) / decoding | solve (every pixel) / decoding |\n|---|---:|---:|\n",

@@ -31,11 +31,11 @@ use serde::{Deserialize, Serialize};
 pub const N_PARAMS: usize = 15;
 /// Parameter indices into a gradient row.
 pub mod idx {
-    pub(crate) const SIGMA0: usize = 0; // .. 3
-    pub(crate) const ALBEDO: usize = 3; // .. 6
+    pub const SIGMA0: usize = 0; // .. 3
+    pub const ALBEDO: usize = 3; // .. 6
     pub const ETA: usize = 6;
-    pub(crate) const KS: usize = 7;
-    pub(crate) const ALPHA: usize = 8;
+    pub const KS: usize = 7;
+    pub const ALPHA: usize = 8;
     pub const AZIMUTH: usize = 9;
     pub const ELEVATION: usize = 10;
     pub const SIGMA_EXPONENT: usize = 11;
