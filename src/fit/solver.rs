@@ -162,13 +162,16 @@ impl Problem<'_> {
     pub fn evaluate(&self, want_jacobian: bool) -> (DVector<f64>, Option<DMatrix<f64>>) {
         let (p, dpdu) = from_unbounded(&self.u);
         let params = Params::from_vec(&p);
+        let frame = params.light.frame();
         let free = self.free_idx();
         let n = free.len();
         let rows: Vec<([f64; 3], Vec<f64>)> = self
             .obs
             .par_iter()
             .map(|o| {
-                let (l, g) = self.model.radiance_with_gradient(&params, &o.geometry);
+                let (l, g) = self
+                    .model
+                    .radiance_with_gradient_in(&params, &frame, &o.geometry);
                 let r = [0, 1, 2].map(|c| o.weight[c] * (l[c] - o.radiance[c]));
                 let mut j = vec![];
                 if want_jacobian {
@@ -321,6 +324,7 @@ impl Problem<'_> {
     pub fn normal_equations(&self) -> Normal {
         let (p, dpdu) = from_unbounded(&self.u);
         let params = Params::from_vec(&p);
+        let frame = params.light.frame();
         let free = self.free_idx();
         let n = free.len();
         let floor = self.floor;
@@ -339,7 +343,9 @@ impl Problem<'_> {
                 let (mut a, mut b, mut c, mut fs) = zero();
                 let mut g = vec![0.0; n];
                 for o in chunk {
-                    let (l, grad) = self.model.radiance_with_gradient(&params, &o.geometry);
+                    let (l, grad) =
+                        self.model
+                            .radiance_with_gradient_in(&params, &frame, &o.geometry);
                     for ch in 0..3 {
                         let w = o.weight[ch];
                         if w == 0.0 {

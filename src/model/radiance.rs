@@ -98,6 +98,15 @@ pub struct SpecularParams {
     pub alpha: f64,
 }
 
+/// A light's direction l and its derivatives ∂l/∂azimuth, ∂l/∂elevation ([`LightAngles::frame`]):
+/// what every pixel of one evaluation shares.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightFrame {
+    pub l: Vector3<f64>,
+    pub dl_da: Vector3<f64>,
+    pub dl_de: Vector3<f64>,
+}
+
 /// Light direction as azimuth and elevation (radians), camera frame:
 /// l = (cos e · sin a, −sin e, −cos e · cos a). (0, 0) is a light at the camera; positive azimuth
 /// is toward +x (right), positive elevation toward −y (up). Both poles (light straight above or
@@ -113,6 +122,16 @@ impl LightAngles {
         let (sa, ca) = self.azimuth.sin_cos();
         let (se, ce) = self.elevation.sin_cos();
         Vector3::new(ce * sa, -se, -ce * ca)
+    }
+
+    /// The direction and its derivatives, computed once for many pixels.
+    pub fn frame(&self) -> LightFrame {
+        let (dl_da, dl_de) = self.jacobian();
+        LightFrame {
+            l: self.direction(),
+            dl_da,
+            dl_de,
+        }
     }
 
     /// ∂l/∂azimuth and ∂l/∂elevation.
@@ -290,15 +309,37 @@ impl Model {
 
     /// RGB radiance at one surface point.
     pub fn radiance(&self, p: &Params, g: &Geometry) -> Rgb {
-        self.eval(p, g, false).0
+        let light = LightFrame {
+            l: p.light.direction(),
+            dl_da: Vector3::zeros(),
+            dl_de: Vector3::zeros(),
+        };
+        self.eval(p, &light, g, false).0
     }
 
     /// RGB radiance and its gradient with respect to all [`N_PARAMS`] parameters.
     pub fn radiance_with_gradient(&self, p: &Params, g: &Geometry) -> (Rgb, Gradient) {
-        self.eval(p, g, true)
+        self.eval(p, &p.light.frame(), g, true)
     }
 
-    fn eval(&self, p: &Params, g: &Geometry, want_grad: bool) -> (Rgb, Gradient) {
+    /// [`Self::radiance_with_gradient`] with the light's frame computed once for many pixels
+    /// (`light` must be `p.light.frame()`).
+    pub fn radiance_with_gradient_in(
+        &self,
+        p: &Params,
+        light: &LightFrame,
+        g: &Geometry,
+    ) -> (Rgb, Gradient) {
+        self.eval(p, light, g, true)
+    }
+
+    fn eval(
+        &self,
+        p: &Params,
+        light: &LightFrame,
+        g: &Geometry,
+        want_grad: bool,
+    ) -> (Rgb, Gradient) {
         let mut out = [0.0; 3];
         let mut grad = [[0.0; N_PARAMS]; 3];
         let nv = g.normal.dot(&g.view);
@@ -306,7 +347,7 @@ impl Model {
             return (out, grad);
         }
         let m = &p.material;
-        let l = p.light.direction();
+        let l = light.l;
         let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
         let lv = l.dot(&g.view).clamp(-1.0, 1.0);
         let theta = nl.acos();
@@ -321,15 +362,20 @@ impl Model {
         };
         let t_exit = fr.transmission();
         let rr = self.reference_radius_mm / g.radius_mm;
-        let ln_rr = rr.ln();
-        let sigma_scale = rr.powf(m.sigma_exponent);
-        let albedo_scale = (m.albedo_curvature * (rr - 1.0)).exp();
-        let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
-        let (dl_da, dl_de) = if want_grad {
-            p.light.jacobian()
+        // Off extensions scale by exactly 1, without the transcendental calls.
+        let sigma_scale = if m.sigma_exponent == 0.0 {
+            1.0
         } else {
-            Default::default()
+            rr.powf(m.sigma_exponent)
         };
+        let albedo_scale = if m.albedo_curvature == 0.0 {
+            1.0
+        } else {
+            (m.albedo_curvature * (rr - 1.0)).exp()
+        };
+        let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
+        let (dl_da, dl_de) = (light.dl_da, light.dl_de);
+        let ln_rr = if want_grad { rr.ln() } else { 0.0 };
         for c in 0..3 {
             let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
             let mix = self.profile(m, theta, sigma);
