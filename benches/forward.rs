@@ -148,7 +148,7 @@ fn bench_normal_equations(c: &mut Criterion) {
     let mut free = [true; workbench::model::N_PARAMS];
     free[workbench::model::idx::SIGMA_EXPONENT] = false;
     free[workbench::model::idx::ALBEDO_CURVATURE] = false;
-    let problem = Problem {
+    let problem = |model: Model| Problem {
         model,
         obs: &obs,
         free,
@@ -161,35 +161,26 @@ fn bench_normal_equations(c: &mut Criterion) {
     g.throughput(Throughput::Elements(n as u64));
     g.sample_size(20);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    for threads in [1, cores] {
+    // The table (the default) on one core and on all; the closed-form CDRF on one core: the
+    // table's gain on the hot path.
+    let closed = Model {
+        tabulated: false,
+        ..model
+    };
+    for (threads, model, suffix) in [
+        (1, model, ""),
+        (cores, model, ""),
+        (1, closed, "_closed_form"),
+    ] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        g.bench_function(format!("{threads}_threads"), |b| {
+        let problem = problem(model);
+        g.bench_function(format!("{threads}_threads{suffix}"), |b| {
             b.iter(|| pool.install(|| black_box(problem.normal_equations())))
         });
     }
-    // The closed-form CDRF instead of the table, one core: the table's gain on the hot path.
-    let closed = Problem {
-        model: Model {
-            tabulated: false,
-            ..model
-        },
-        obs: &obs,
-        free,
-        u: to_unbounded(&params.to_vec()),
-        priors: vec![],
-        history: None,
-        floor: false,
-    };
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
-    g.bench_function("1_threads_closed_form", |b| {
-        b.iter(|| one.install(|| black_box(closed.normal_equations())))
-    });
     g.finish();
 }
 

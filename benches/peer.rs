@@ -32,8 +32,8 @@ fn main() {
     o.jackknife = false;
     let fitted = solve::run(&o).expect("solve");
     let l = solve::load(&o).expect("load");
-    let truth_fit = fitted.params();
-    let light = truth_fit.light.direction();
+    let fit_params = fitted.params();
+    let light = fit_params.light.direction();
     // Every pixel outside 30° of the mirror direction: the diffuse model alone describes them.
     let obs: Vec<Obs> = l
         .spheres
@@ -46,7 +46,7 @@ fn main() {
         .cloned()
         .collect();
     // The same start for both: the fit moved off (σ0 ×1.3, albedo ×0.8, η 1.45, the light 1°).
-    let mut v = truth_fit.to_vec();
+    let mut v = fit_params.to_vec();
     for c in 0..3 {
         v[idx::SIGMA0 + c] *= 1.3;
         v[idx::ALBEDO + c] *= 0.8;

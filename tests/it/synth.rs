@@ -11,18 +11,8 @@ use workbench::synth::session::{self, Format, Layout, SessionConfig};
 
 fn small_camera() -> Camera {
     Camera {
-        fx: 700.0,
-        fy: 700.0,
-        cx: 321.6,
         cy: 239.2,
-        distortion: Distortion {
-            k1: -0.12,
-            k2: 0.08,
-            p1: 4e-4,
-            p2: -3e-4,
-            k3: 0.0,
-        },
-        image_size: [640, 480],
+        ..crate::common::camera_640x480()
     }
 }
 
