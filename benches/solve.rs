@@ -115,6 +115,7 @@ fn level_fit(l: &solve::Loaded, opts: &Options, reduction: Reduction) -> (f64, j
         light_fit: joint::LightFit::Prior,
         light_std: l.light_std,
         floor: l.fit_floor,
+        checks: true,
     };
     let spheres: Vec<&workbench::fit::observe::SphereData> = l.spheres.iter().collect();
     let t0 = Instant::now();

@@ -32,8 +32,10 @@ use serde::{Deserialize, Serialize};
 pub(crate) const SHIFT_LIMIT: f64 = crate::fit::reduce::SHIFT_STD;
 /// The highlight region pooled in pixel blocks, in detector highlight radii.
 pub(crate) const HIGHLIGHT_KEEP: f64 = 1.0;
-/// Block sizes (pixels) tried for the highlight, largest first.
-pub(crate) const HIGHLIGHT_BLOCKS: [u32; 4] = [16, 8, 4, 2];
+/// Block sizes (pixels) tried for the highlight, smallest first: a block's bias grows with its
+/// size (about 4× a doubling), so the first one out of tolerance ends the search, usually the
+/// first one tried (docs/pipeline.md, step 4).
+pub(crate) const HIGHLIGHT_BLOCKS: [u32; 4] = [2, 4, 8, 16];
 /// Huber threshold (in robust σ of the residuals).
 pub(crate) const HUBER_K: f64 = 1.345;
 /// Default prior on η (a typical wax, soap or resin).
@@ -127,6 +129,10 @@ pub struct Setup {
     /// The photos' dark floor is unknown (lit surroundings): a constant per channel fitted with
     /// the rest ([`solver::fit_with_floor`]; [`Fit::floor`] holds it).
     pub floor: bool,
+    /// Run the checks whose refits only feed notes and statuses (σ0 against the limits of what
+    /// the data resolve); off for refits whose parameters alone are used (the jackknife's, the
+    /// model choice's).
+    pub checks: bool,
 }
 
 /// How the joint fit treats the light direction.
@@ -430,15 +436,17 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         &mut stages,
         &mut notes,
     );
-    resolution_notes(
-        setup,
-        spheres,
-        &final_obs,
-        &fit,
-        &priors,
-        &mut status,
-        &mut notes,
-    );
+    if setup.checks {
+        resolution_notes(
+            setup,
+            spheres,
+            &final_obs,
+            &fit,
+            &priors,
+            &mut status,
+            &mut notes,
+        );
+    }
     let (clipped, on) = spheres
         .iter()
         .fold((0, 0), |(c, n), s| (c + s.saturated, n + s.pixels));
@@ -1125,10 +1133,10 @@ fn choose_reduction(
                         let hl = pooled.highlight_cells(b);
                         let shift = pooled.shift(&angular, &hl, model, p, free);
                         levels.push(level(f, b, angular.len() + hl.len(), &shift));
-                        if shift.within_tolerance {
-                            highlight = (b, hl);
+                        if !shift.within_tolerance {
                             break;
                         }
+                        highlight = (b, hl);
                     }
                     angular.extend(highlight.1);
                     (Some(f), highlight.0, Some(angular))

@@ -23,6 +23,7 @@ pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Redu
         light_fit: opts.light_fit,
         light_std: l.light_std,
         floor: l.fit_floor && opts.method == Method::Joint,
+        checks: true,
     }
 }
 
@@ -64,42 +65,56 @@ pub(crate) fn choose_extensions(
     }
     // Every refit starts from the plain model's fit to all the spheres.
     let base = joint::fit_joint(
-        &setup(opts, l, Extensions::default(), Reduction::Factor(16)),
+        &Setup {
+            checks: false,
+            ..setup(opts, l, Extensions::default(), Reduction::Factor(16))
+        },
         fitted,
     );
+    // Every (candidate, left-out radius) refit in parallel.
+    use rayon::prelude::*;
+    let pairs: Vec<(usize, f64)> = (0..candidates.len())
+        .flat_map(|c| radii.iter().map(move |&r| (c, r)))
+        .collect();
+    let refits: Vec<(f64, bool)> = pairs
+        .par_iter()
+        .map(|&(c, r)| {
+            let ext = candidates[c];
+            let train: Vec<&SphereData> = fitted
+                .iter()
+                .copied()
+                .filter(|s| s.radius_mm != r)
+                .collect();
+            let test: Vec<&SphereData> = fitted
+                .iter()
+                .copied()
+                .filter(|s| s.radius_mm == r)
+                .collect();
+            let mut su = setup(opts, l, ext, Reduction::Factor(16));
+            su.warm = Some(base.fit.params);
+            su.checks = false;
+            let jf = joint::fit_joint(&su, &train);
+            let (mut d, mut o) = (0.0, 0.0);
+            for s in test {
+                let p = joint::predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
+                d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
+                o += p.pixels as f64;
+            }
+            ((d / o.max(1.0)).sqrt(), jf.fit.converged)
+        })
+        .collect();
     let results: Vec<Candidate> = candidates
         .iter()
-        .map(|&ext| {
-            let mut errs = vec![];
-            let mut ok = true;
-            for &r in &radii {
-                let train: Vec<&SphereData> = fitted
-                    .iter()
-                    .copied()
-                    .filter(|s| s.radius_mm != r)
-                    .collect();
-                let test: Vec<&SphereData> = fitted
-                    .iter()
-                    .copied()
-                    .filter(|s| s.radius_mm == r)
-                    .collect();
-                let mut su = setup(opts, l, ext, Reduction::Factor(16));
-                su.warm = Some(base.fit.params);
-                let jf = joint::fit_joint(&su, &train);
-                ok &= jf.fit.converged;
-                let (mut d, mut o) = (0.0, 0.0);
-                for s in test {
-                    let p =
-                        joint::predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
-                    d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
-                    o += p.pixels as f64;
-                }
-                errs.push((d / o.max(1.0)).sqrt());
-            }
+        .enumerate()
+        .map(|(c, ext)| {
+            let mine: Vec<&(f64, bool)> = (0..pairs.len())
+                .filter(|&i| pairs[i].0 == c)
+                .map(|i| &refits[i])
+                .collect();
             Candidate {
                 extensions: ext.name(),
-                heldout_rel_rmse: errs.iter().sum::<f64>() / errs.len() as f64,
-                converged: ok,
+                heldout_rel_rmse: mine.iter().map(|r| r.0).sum::<f64>() / radii.len() as f64,
+                converged: mine.iter().all(|r| r.1),
             }
         })
         .collect();

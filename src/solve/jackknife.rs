@@ -43,6 +43,7 @@ pub fn jackknife(
             let test: Vec<&SphereData> = fitted.iter().filter(same).copied().collect();
             let mut su = setup(opts, l, ext, reduction);
             su.warm = Some(jf.fit.params);
+            su.checks = false;
             let f = joint::fit_joint(&su, &train);
             let preds: Vec<Prediction> = test
                 .iter()
