@@ -128,11 +128,55 @@ fn machine() -> String {
     format!("{cpu}, {cores} cores")
 }
 
+/// The file that marks a folder as made by `workbench bench` (and so deleted by its next run).
+const MARK: &str = ".workbench-bench";
+
+/// Make way for a folder the benchmark writes: one it made before (it holds [`MARK`]) is
+/// deleted; anything else there is an error, never deleted.
+fn fresh_dir(dir: &Path) -> Result<()> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    if !dir.join(MARK).is_file() {
+        return Err(Error::invalid(
+            dir,
+            "exists and was not made by workbench bench: it would be overwritten; choose another --out or move it",
+        ));
+    }
+    std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
+fn session_dir(opts: &BenchOptions, name: &str) -> PathBuf {
+    opts.out.join("sessions").join(
+        name.replace(['×', ' '], "-")
+            .replace('%', "pc")
+            .to_lowercase(),
+    )
+}
+
+fn checkerboard_dir(opts: &BenchOptions) -> PathBuf {
+    opts.out.join("checkerboard")
+}
+
+fn mark_dir(dir: &Path) -> Result<()> {
+    crate::formats::output::write_bytes(&dir.join(MARK), b"made by workbench bench\n")
+}
+
 /// Run the benchmark and write its report into `opts.out`.
 pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let t0 = Instant::now();
-    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let data = sessions(opts.quick);
+    // Every folder it will replace is checked before any work.
+    for dir in data
+        .iter()
+        .map(|d| session_dir(opts, &d.name))
+        .chain([checkerboard_dir(opts)])
+    {
+        if dir.exists() && !dir.join(MARK).is_file() {
+            fresh_dir(&dir)?;
+        }
+    }
+    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let settings = reductions();
     let steps = data.len() * (2 + settings.len()) + 1;
     let pb = crate::progress::bar(steps as u64, "bench", opts.quiet);
@@ -143,14 +187,10 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     }
     pb.inc(1);
     for d in &data {
-        let dir = opts.out.join("sessions").join(
-            d.name
-                .replace(['×', ' '], "-")
-                .replace('%', "pc")
-                .to_lowercase(),
-        );
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = session_dir(opts, &d.name);
+        fresh_dir(&dir)?;
         session::generate(&config(d), &dir, None, true)?;
+        mark_dir(&dir)?;
         let truth: SessionTruth = crate::formats::output::read_json(&dir.join("truth.json"))?;
         pb.inc(1);
         let t = Instant::now();
@@ -212,9 +252,22 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         rows,
         total_s: t0.elapsed().as_secs_f64(),
     };
-    crate::formats::output::write_json(&opts.out.join("report.json"), &report)?;
-    crate::formats::output::write_bytes(&opts.out.join("report.md"), markdown(&report).as_bytes())?;
-    error_vs_time(&report).save(&opts.out.join("error-vs-time"))?;
+    // One set: the figure and the Markdown, then report.json last.
+    let (json, md, fig) = (
+        opts.out.join("report.json"),
+        opts.out.join("report.md"),
+        opts.out.join("error-vs-time"),
+    );
+    let set = crate::formats::output::OutputSet::begin(&[
+        &json,
+        &md,
+        &fig.with_extension("png"),
+        &fig.with_extension("svg"),
+    ]);
+    crate::formats::output::write_bytes(&md, markdown(&report).as_bytes())?;
+    error_vs_time(&report).save(&fig)?;
+    crate::formats::output::write_json(&json, &report)?;
+    set.commit()?;
     Ok(report)
 }
 
@@ -300,9 +353,10 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
         views: if opts.quick { 10 } else { 15 },
         ..CheckerConfig::default()
     };
-    let dir = opts.out.join("checkerboard");
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = checkerboard_dir(opts);
+    fresh_dir(&dir)?;
     let out = checkerboard::generate(&cfg, &dir, true)?;
+    mark_dir(&dir)?;
     let truth = out.truth.intrinsics;
     let mut rows = vec![];
     for (name, choice) in [

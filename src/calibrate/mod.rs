@@ -27,14 +27,19 @@ impl Pattern {
         (self.cols * self.rows) as usize
     }
 
-    /// Parse "9x6".
+    /// The most inner corners along a side (a printed board with more is not a camera target;
+    /// the bound keeps the corner count and the detector's work small).
+    pub const MAX_SIDE: u32 = 100;
+
+    /// Parse "9x6": each side 2 to [`Pattern::MAX_SIDE`].
     pub fn parse(s: &str) -> Option<Pattern> {
         let (c, r) = s.split_once(['x', 'X'])?;
         let p = Pattern {
             cols: c.trim().parse().ok()?,
             rows: r.trim().parse().ok()?,
         };
-        (p.cols >= 2 && p.rows >= 2).then_some(p)
+        let side = 2..=Self::MAX_SIDE;
+        (side.contains(&p.cols) && side.contains(&p.rows)).then_some(p)
     }
 
     /// Board-frame corner positions (mm), row by row, as OpenCV orders detected corners.
@@ -615,6 +620,14 @@ mod tests {
     fn pattern_parsing() {
         assert_eq!(Pattern::parse("9x6"), Some(Pattern { cols: 9, rows: 6 }));
         assert_eq!(Pattern::parse("1x6"), None);
+        assert_eq!(
+            Pattern::parse("100x100"),
+            Some(Pattern {
+                cols: 100,
+                rows: 100
+            })
+        );
+        assert_eq!(Pattern::parse("70000x70000"), None);
         assert_eq!(Pattern::parse("nine"), None);
     }
 }

@@ -350,9 +350,12 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             "images_read": images_read,
         })),
     };
-    crate::formats::output::write_json(&intrinsics_file, &file)?;
+    // One set: the YAML and the plots, then intrinsics.json (what the reuse check trusts) last.
+    let set = crate::formats::output::OutputSet::begin(&[&intrinsics_file, &yaml_file, &plot_dir]);
     crate::formats::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
     let plot_files = super::plots::write_all(&cal, &object, size, &plot_dir)?;
+    crate::formats::output::write_json(&intrinsics_file, &file)?;
+    set.commit()?;
     Ok(Report {
         calibration: cal,
         pattern,

@@ -123,10 +123,18 @@ impl Sphere {
 
     /// The silhouette conic in (undistorted, ideal pinhole) pixel coordinates: K⁻ᵀ Q K⁻¹.
     pub(crate) fn image_conic(&self, cam: &Camera) -> Matrix3<f64> {
-        let kinv = cam
-            .k()
-            .try_inverse()
-            .expect("camera matrix with fx, fy ≠ 0");
+        // K⁻¹ in closed form (K is upper triangular without skew).
+        let kinv = Matrix3::new(
+            1.0 / cam.fx,
+            0.0,
+            -cam.cx / cam.fx,
+            0.0,
+            1.0 / cam.fy,
+            -cam.cy / cam.fy,
+            0.0,
+            0.0,
+            1.0,
+        );
         kinv.transpose() * self.normalized_conic() * kinv
     }
 

@@ -10,7 +10,10 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<Calibrated> {
     use workbench::calibrate::{run, Pattern};
     let pattern = match &a.pattern {
         Some(p) => Some(Pattern::parse(p).with_context(|| {
-            format!("--pattern {p:?}: expected COLSxROWS inner corners, at least 2x2, e.g. 9x6")
+            format!(
+                "--pattern {p:?}: expected COLSxROWS inner corners, 2 to {} a side, e.g. 9x6",
+                Pattern::MAX_SIDE
+            )
         })?),
         None => None,
     };

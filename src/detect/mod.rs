@@ -589,6 +589,9 @@ pub fn run(opts: &Options) -> Result<Detections> {
         }
     };
     let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    // One set: the overlays, then detections.json (what the reuse check trusts) last.
+    let overlay_dir = out_dir.join("overlays");
+    let set = crate::formats::output::OutputSet::begin(&[&out, &overlay_dir]);
     let mut images = vec![];
     for (i, ((img, fs), info)) in per_image.iter().zip(&report.images).enumerate() {
         let light_for_samples = match sess.light {
@@ -697,5 +700,6 @@ pub fn run(opts: &Options) -> Result<Detections> {
         seconds: t0.elapsed().as_secs_f64(),
     };
     crate::formats::output::write_json(&out, &det)?;
+    set.commit()?;
     Ok(det)
 }

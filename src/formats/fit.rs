@@ -379,6 +379,21 @@ impl FitFile {
                 None => return Err(Error::invalid(file, format!("parameter {name} missing"))),
             }
         }
+        let c = &self.correlation;
+        if c.names.len() > PARAM_NAMES.len()
+            || c.matrix.len() != c.names.len()
+            || c.matrix.iter().any(|r| r.len() != c.names.len())
+        {
+            return Err(Error::invalid(
+                file,
+                format!(
+                    "correlation: {} names and a {}-row matrix; expected at most {} parameters and a square matrix of them",
+                    c.names.len(),
+                    c.matrix.len(),
+                    PARAM_NAMES.len()
+                ),
+            ));
+        }
         let m = self.params().material;
         if !(0.0..1.0).contains(&m.kernel_weight)
             || (m.kernel_weight > 0.0 && !(m.kernel_ratio > 1.0))

@@ -6,6 +6,10 @@ use crate::formats::output::read_json;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// The largest image side accepted (pixels): beyond any camera sensor, and what keeps every
+/// per-pixel buffer allocatable.
+pub const MAX_IMAGE_SIDE: u32 = 65_536;
+
 pub(crate) const SCHEMA: &str = "workbench.intrinsics/1";
 
 /// Standard deviations of the intrinsics (px, and unitless for distortion).
@@ -99,6 +103,27 @@ impl IntrinsicsFile {
                 path,
                 "focal lengths must be positive and all values finite",
             ));
+        }
+        let [w, h] = f.image_size;
+        if w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+            return Err(Error::invalid(
+                path,
+                format!("image_size {w}x{h}: each side must be at most {MAX_IMAGE_SIDE} pixels"),
+            ));
+        }
+        // A field of view between 0.06° and 179.9° across the larger side.
+        let side = w.max(h) as f64;
+        for (name, v) in [("fx", f.fx), ("fy", f.fy)] {
+            if !(side / 1000.0..=1000.0 * side).contains(&v) {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "{name} = {v:?} pixels for a {w}x{h} image: a lens between {} and {} pixels (fields of view 179.9° to 0.06°) is expected",
+                        side / 1000.0,
+                        1000.0 * side
+                    ),
+                ));
+            }
         }
         Ok(f)
     }

@@ -1,20 +1,150 @@
-//! Atomic output: every file is written to a temporary file in the destination folder and renamed
-//! into place, so a reader never sees a half-written file and a failed run leaves none behind.
+//! Atomic output. Every file is written to a temporary file in its destination folder
+//! (`.workbench-*.tmp`, which no reader looks at), flushed to disk (`fsync`) and renamed into
+//! place, and the folder is synced, so a reader never sees a half-written file and a failed run
+//! leaves none behind.
+//!
+//! A command that writes several files makes them one set ([`OutputSet`]): while the set is open,
+//! every file written under its roots stays a temporary; [`OutputSet::commit`] renames them all
+//! at the end, in the order written (the file readers trust — `fit.json`, `intrinsics.json`,
+//! `detections.json`, the table's sidecar — is written last, so it is renamed last), then syncs
+//! their folders. A run that fails or is killed before the commit leaves the previous set as it
+//! was (a killed run's temporaries stay behind under their hidden names; nothing reads them). Only
+//! the renames themselves, microseconds, can be cut in half by a kill; the file trusted is then
+//! the previous one, and an input newer than it makes the next run redo the set.
 
 use crate::error::{Error, Result};
 use serde::Serialize;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::Mutex;
 
-/// Write a file atomically through a writer callback.
+/// A file written and synced, waiting for its set's commit.
+struct Pending {
+    tmp: tempfile::TempPath,
+    dest: PathBuf,
+}
+
+/// An open set: the folders and files it covers, and what was written under them.
+struct Open {
+    id: u64,
+    roots: Vec<PathBuf>,
+    pending: Vec<Pending>,
+}
+
+/// The open sets of this process (one per command; several when tests run commands in parallel,
+/// each in its own folders).
+static OPEN: Mutex<Vec<Open>> = Mutex::new(Vec::new());
+static NEXT_ID: AtomicU64 = AtomicU64::new(1);
+
+fn open_sets() -> std::sync::MutexGuard<'static, Vec<Open>> {
+    OPEN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// `path` made absolute (without touching the file system), for comparing with a set's roots.
+fn absolute(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// The outputs of one command, committed together (module doc). Dropped without a commit (an
+/// error on the way), its temporaries are deleted and the previous outputs stay.
+#[must_use = "an output set is committed with commit(); dropped, its files are discarded"]
+pub struct OutputSet {
+    id: u64,
+}
+
+impl OutputSet {
+    /// Open a set covering `roots`: output files, and folders whose files (at any depth) belong
+    /// to it.
+    pub fn begin(roots: &[&Path]) -> OutputSet {
+        let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
+        open_sets().push(Open {
+            id,
+            roots: roots.iter().map(|r| absolute(r)).collect(),
+            pending: vec![],
+        });
+        OutputSet { id }
+    }
+
+    fn take(&self) -> Option<Open> {
+        let mut sets = open_sets();
+        let k = sets.iter().position(|o| o.id == self.id)?;
+        Some(sets.remove(k))
+    }
+
+    /// Rename every file written under the set into place, in the order written, and sync their
+    /// folders.
+    pub fn commit(self) -> Result<()> {
+        let Some(open) = self.take() else {
+            return Ok(());
+        };
+        let mut dirs: Vec<PathBuf> = vec![];
+        for p in open.pending {
+            p.tmp
+                .persist(&p.dest)
+                .map_err(|e| Error::io(&p.dest, e.error))?;
+            let dir = parent(&p.dest).to_path_buf();
+            if !dirs.contains(&dir) {
+                dirs.push(dir);
+            }
+        }
+        for d in dirs {
+            sync_dir(&d)?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for OutputSet {
+    fn drop(&mut self) {
+        // Not committed: the temporaries go (TempPath deletes its file when dropped).
+        drop(self.take());
+    }
+}
+
+fn parent(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// Sync a folder, so that the renames in it survive a power cut (a no-op where folders cannot be
+/// opened for that, e.g. on Windows).
+fn sync_dir(dir: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        std::fs::File::open(dir)
+            .and_then(|f| f.sync_all())
+            .map_err(|e| Error::io(dir, e))?;
+    }
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
+}
+
+/// Files written so far by this process, for the test hook below.
+static WRITTEN: AtomicUsize = AtomicUsize::new(0);
+
+/// Test hook: with `WORKBENCH_ABORT_AFTER_WRITES=n` in the environment, the process aborts (as
+/// if killed) right after its n-th output file is written, before any later rename or commit.
+/// The kill tests (`tests/it/reliability.rs`) use it to stop commands at every point.
+fn abort_hook() {
+    let n = WRITTEN.fetch_add(1, Ordering::SeqCst) + 1;
+    if let Some(limit) = std::env::var_os("WORKBENCH_ABORT_AFTER_WRITES") {
+        if limit.to_str().and_then(|v| v.parse::<usize>().ok()) == Some(n) {
+            std::process::abort();
+        }
+    }
+}
+
+/// Write a file atomically through a writer callback: into its open [`OutputSet`], if one covers
+/// it, else into place at once.
 pub(crate) fn write_atomic<F>(path: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&mut std::io::BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
 {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = parent(path);
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut tmp = tempfile::Builder::new()
         .prefix(".workbench-")
@@ -35,8 +165,24 @@ where
             .set_permissions(perm)
             .map_err(|e| Error::io(path, e))?;
     }
+    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    abort_hook();
+    let dest = absolute(path);
+    {
+        let mut sets = open_sets();
+        if let Some(set) = sets
+            .iter_mut()
+            .find(|o| o.roots.iter().any(|r| dest.starts_with(r)))
+        {
+            set.pending.push(Pending {
+                tmp: tmp.into_temp_path(),
+                dest,
+            });
+            return Ok(());
+        }
+    }
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    sync_dir(dir)
 }
 
 /// Write bytes atomically.

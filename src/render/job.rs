@@ -323,6 +323,8 @@ pub fn check(fit_path: &Path, dir: &Path, table_size: TableSize) -> Result<Vec<S
     let t = table(&fm, table_size, None)?;
     let results = check::check_fit(&fit, fit_path, &fm, &t.lut)?;
     let exposure = default_exposure(&t.lut, fm.material.eta);
+    // One set: the pictures, then sphere-check.json last.
+    let set = crate::formats::output::OutputSet::begin(&[dir]);
     let mut out = Vec::new();
     for (cmp, rendered, predicted) in results {
         let strip = side_by_side(&rendered, &predicted, 10.0);
@@ -359,6 +361,7 @@ pub fn check(fit_path: &Path, dir: &Path, table_size: TableSize) -> Result<Vec<S
             spheres: &out,
         },
     )?;
+    set.commit()?;
     Ok(out)
 }
 

@@ -206,10 +206,15 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     pb.inc(1);
     let fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
-    crate::formats::output::write_json(&out, &fit)?;
+    // One set: the figures, then fit.json (what the reuse check trusts) last.
+    let mut roots: Vec<&Path> = vec![&out];
+    roots.extend(opts.plots.as_deref());
+    let set = crate::formats::output::OutputSet::begin(&roots);
     if let Some(dir) = &opts.plots {
         crate::figures::fitplot::write_all(&fit, &out, &l.spheres, dir)?;
     }
+    crate::formats::output::write_json(&out, &fit)?;
+    set.commit()?;
     pb.finish_and_clear();
     Ok(fit)
 }

@@ -28,5 +28,8 @@ pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> 
             ),
         ));
     }
-    crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)
+    let set = crate::formats::output::OutputSet::begin(&[dir]);
+    let files = crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)?;
+    set.commit()?;
+    Ok(files)
 }

@@ -287,3 +287,55 @@ fn symlink_loop() {
     std::os::unix::fs::symlink(&p, d.join("r20b.png")).unwrap();
     refused("solve", &d, "r20.png");
 }
+
+/// Sizes a user controls, each refused with one line: a chessboard pattern of 70000 × 70000
+/// corners (it used to exhaust memory), a camera with fx = fy = 10⁻²⁰⁰ (it reached an `expect`)
+/// or a 2 GiB image size, and a fit.json whose correlation lists 600 parameters (it overflowed
+/// the figure's buffer).
+#[test]
+fn sizes_out_of_bounds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = session_in(tmp.path(), "s", Format::Png16);
+    if cfg!(feature = "opencv") {
+        let (code, err) = wb(&[
+            "calibrate",
+            dir.to_str().unwrap(),
+            "--pattern",
+            "70000x70000",
+        ]);
+        assert_ne!(code, 0);
+        assert!(err.contains("2 to 100 a side"), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    let intrinsics = dir.join("intrinsics.json");
+    let good = std::fs::read_to_string(&intrinsics).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["fx"] = serde_json::json!(1e-200);
+    v["fy"] = serde_json::json!(1e-200);
+    std::fs::write(&intrinsics, v.to_string()).unwrap();
+    let err = refused("detect", &dir, "intrinsics.json");
+    assert!(err.contains("fx = 1e-200"), "{err}");
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["image_size"] = serde_json::json!([1u64 << 31, 240]);
+    std::fs::write(&intrinsics, v.to_string()).unwrap();
+    refused("detect", &dir, "image_size");
+    std::fs::write(&intrinsics, &good).unwrap();
+    // A real fit, then its correlation blown up to 600 names.
+    let (code, err) = wb(&["solve", dir.to_str().unwrap(), "--no-jackknife"]);
+    assert!(code == 0 || code == 3, "{err}");
+    let fit = dir.join("fit.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
+    let names: Vec<String> = (0..600).map(|k| format!("p{k}")).collect();
+    let matrix = vec![vec![0.0; 600]; 600];
+    v["correlation"] = serde_json::json!({ "names": names, "matrix": matrix });
+    let bad = tmp.path().join("bad-fit.json");
+    std::fs::write(&bad, v.to_string()).unwrap();
+    let (code, err) = wb(&["plot", bad.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("bad-fit.json") && err.contains("600 names"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}

@@ -15,6 +15,7 @@ mod layout;
 mod model;
 mod pbr;
 mod photo;
+mod reliability;
 mod render;
 mod solve;
 mod solver;

@@ -1,0 +1,176 @@
+//! Outputs as a set: a command killed at any point leaves the previous outputs exactly as they
+//! were, and the next complete run leaves a complete new set (src/formats/output.rs). The kill is
+//! the test hook `WORKBENCH_ABORT_AFTER_WRITES=n`: the process aborts right after its n-th output
+//! file is written.
+
+use crate::common::wb;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Run the binary with the abort hook at `n` writes: its exit code (-1 when killed by a signal).
+fn wb_killed_after(n: usize, args: &[&str]) -> i32 {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .args(args)
+        .env("WORKBENCH_ABORT_AFTER_WRITES", n.to_string())
+        .output()
+        .unwrap();
+    out.status.code().unwrap_or(-1)
+}
+
+/// Every visible file under `dir` (the hidden temporaries of a killed run left out) with its
+/// contents.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            if name.starts_with(".workbench-") {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// Kill `args` after 1, 2, 4, … writes until a run completes: every killed run must leave the
+/// snapshot of `dir` as `before`; the run that completes must change `changed` and leave no
+/// temporaries. Returns the number of kills.
+fn kill_everywhere(dir: &Path, args: &[&str], changed: &str) -> usize {
+    let before = snapshot(dir);
+    assert!(before.contains_key(changed), "{changed} missing before");
+    let mut kills = 0;
+    let mut n = 1;
+    loop {
+        let code = wb_killed_after(n, args);
+        if code == 0 {
+            break;
+        }
+        assert_eq!(
+            code, -1,
+            "{args:?} after {n} writes: not killed, exit {code}"
+        );
+        kills += 1;
+        let now = snapshot(dir);
+        assert_eq!(
+            now.keys().collect::<Vec<_>>(),
+            before.keys().collect::<Vec<_>>(),
+            "{args:?} killed after {n} writes: the files differ"
+        );
+        for (k, v) in &now {
+            assert!(
+                *v == before[k],
+                "{args:?} killed after {n} writes: {k} is not the previous one"
+            );
+        }
+        n *= 2;
+        assert!(n < 4096, "{args:?} never completed");
+    }
+    let after = snapshot(dir);
+    assert!(
+        after[changed] != before[changed],
+        "{changed} was not rewritten"
+    );
+    kills
+}
+
+/// solve with figures: fit.json and every figure, killed at 1, 2, 4, … written files.
+#[test]
+fn solve_killed_anywhere_keeps_the_previous_set() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = tmp.path().join("s");
+    let so = s.to_str().unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet", "synth", "session", "--out", so, "--size", "480x320", "--fx", "520", "--radii",
+        "20,15,12", "--layout", "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let plots = s.join("plots");
+    let po = plots.to_str().unwrap();
+    let (code, _, err) = wb(&["--quiet", "solve", "--joint", so, "--plots", po]);
+    assert!(code == 0 || code == 3, "{err}");
+    // Another option: a different fit.json and figures.
+    let kills = kill_everywhere(
+        &s,
+        &[
+            "--quiet",
+            "solve",
+            "--joint",
+            so,
+            "--plots",
+            po,
+            "--no-jackknife",
+        ],
+        "fit.json",
+    );
+    // fit.json and at least the index and a dozen figures (PNG + SVG each) were written.
+    assert!(kills >= 4, "only {kills} kills");
+    let after = snapshot(&s);
+    let fit: serde_json::Value = serde_json::from_slice(&after["fit.json"]).unwrap();
+    assert!(
+        fit["skipped"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|v| v.as_str().unwrap().contains("--no-jackknife")),
+        "the new fit.json is the --no-jackknife run's"
+    );
+}
+
+/// calibrate: intrinsics.json, the OpenCV YAML and the plots.
+#[cfg(feature = "opencv")]
+#[test]
+fn calibrate_killed_anywhere_keeps_the_previous_set() {
+    let tmp = tempfile::tempdir().unwrap();
+    let c = tmp.path().join("c");
+    let co = c.to_str().unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "checkerboard",
+        "--out",
+        co,
+        "--views",
+        "6",
+        "--size",
+        "640x480",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = wb(&["--quiet", "calibrate", co]);
+    assert_eq!(code, 0, "{err}");
+    let kills = kill_everywhere(
+        &c,
+        &["--quiet", "calibrate", co, "--detector", "both"],
+        "intrinsics.json",
+    );
+    assert!(kills >= 2, "only {kills} kills");
+}
+
+/// bench never deletes a folder it did not make.
+#[test]
+fn bench_keeps_folders_it_did_not_make() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mine = tmp.path().join("sessions/640-480-1pc-png");
+    std::fs::create_dir_all(&mine).unwrap();
+    std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "bench",
+        "--quick",
+        "--out",
+        tmp.path().to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("was not made by workbench bench"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(mine.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
