@@ -106,7 +106,7 @@ pub(crate) struct SolveArgs {
     /// Start light as azimuth,elevation in degrees, instead of the detector's.
     #[arg(long, value_parser = angles, allow_hyphen_values = true)]
     pub(crate) start_light: Option<[f64; 2]>,
-    /// Run detection even when detections.json is newer than its inputs.
+    /// Run detection even when detections.json records inputs of the same content.
     #[arg(long)]
     pub(crate) redetect: bool,
     /// Keep the light at the detector's estimate (or --start-light) instead of refining it.

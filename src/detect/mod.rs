@@ -698,6 +698,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
         light_elevation_deg: angles.map(|a| a.elevation.to_degrees()),
         images,
         seconds: t0.elapsed().as_secs_f64(),
+        inputs: crate::formats::fingerprint::of_files(&report.input_files())?,
     };
     crate::formats::output::write_json(&out, &det)?;
     set.commit()?;

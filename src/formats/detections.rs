@@ -130,6 +130,10 @@ pub struct Detections {
     pub light_elevation_deg: Option<f64>,
     pub images: Vec<ImageDetection>,
     pub seconds: f64,
+    /// What it was made from: session.json, the photos and the intrinsics, each as
+    /// `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
+    #[serde(default)]
+    pub inputs: crate::formats::fingerprint::Inputs,
 }
 
 /// How a highlight was located.

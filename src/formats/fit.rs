@@ -261,6 +261,10 @@ pub struct FitFile {
     /// the same options on unchanged inputs reuses this file.
     #[serde(default)]
     pub options: String,
+    /// What it was made from: session.json, the photos, the intrinsics and detections.json, each
+    /// as `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
+    #[serde(default)]
+    pub inputs: crate::formats::fingerprint::Inputs,
 }
 
 /// The paper's baseline beside a joint fit: its assumptions and per-radius fits.

@@ -1,10 +1,11 @@
 //! Files the stages exchange with the outside world and with each other: the session a user
 //! writes ([`session`]), the camera's calibration ([`intrinsics`]), photos ([`photo`]) and their EXIF
-//! ([`exif`]), what the detector found ([`detections`]), a fit ([`fit`]), and atomic output
-//! ([`output`]).
+//! ([`exif`]), what the detector found ([`detections`]), a fit ([`fit`]), atomic output
+//! ([`output`]) and what an output was made from ([`fingerprint`]).
 
 pub mod detections;
 pub mod exif;
+pub mod fingerprint;
 pub mod fit;
 pub mod intrinsics;
 pub mod output;

@@ -9,8 +9,8 @@
 //! `detections.json`, the table's sidecar — is written last, so it is renamed last), then syncs
 //! their folders. A run that fails or is killed before the commit leaves the previous set as it
 //! was (a killed run's temporaries stay behind under their hidden names; nothing reads them). Only
-//! the renames themselves, microseconds, can be cut in half by a kill; the file trusted is then
-//! the previous one, and an input newer than it makes the next run redo the set.
+//! the renames themselves, microseconds, can be cut short by a kill: the trusted file is then
+//! still the previous one, beside some of the new files.
 
 use crate::error::{Error, Result};
 use serde::Serialize;

@@ -224,6 +224,16 @@ pub struct SessionReport {
     pub images: Vec<ImageInfo>,
 }
 
+impl SessionReport {
+    /// The files a session's results depend on: session.json, the photos, the intrinsics.
+    pub fn input_files(&self) -> Vec<PathBuf> {
+        let mut v = vec![self.session_file.clone()];
+        v.extend(self.images.iter().map(|i| i.path.clone()));
+        v.extend(self.intrinsics_file.clone());
+        v
+    }
+}
+
 /// The EXIF exposures of the photos without one in session.json. A photo lacking ISO or f-number
 /// is compared at the value the other photos share (100 and f/8 when none has it); when the others
 /// differ in it, the photo is refused, naming the field.

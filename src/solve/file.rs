@@ -219,5 +219,6 @@ pub(super) fn fit_file(
             ..l.timings.clone()
         },
         options: fingerprint(opts),
+        inputs: l.inputs.clone(),
     }
 }

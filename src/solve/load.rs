@@ -2,6 +2,7 @@
 //! and sampled; and whether an earlier fit.json can stand for this run.
 
 use super::*;
+use crate::formats::fingerprint::{self, Inputs};
 
 /// Everything loaded before fitting.
 pub struct Loaded {
@@ -22,35 +23,19 @@ pub struct Loaded {
     pub fit_floor: bool,
     pub skipped: Vec<String>,
     pub timings: Timings,
+    /// What the fit is made from: the session's input files and detections.json, by content.
+    pub inputs: Inputs,
 }
 
-fn mtime(p: &Path) -> Option<SystemTime> {
-    std::fs::metadata(p).and_then(|m| m.modified()).ok()
-}
-
-/// The files a session's results depend on: session.json, the photos, the intrinsics.
-fn inputs(report: &SessionReport) -> Vec<PathBuf> {
-    let mut v = vec![report.session_file.clone()];
-    v.extend(report.images.iter().map(|i| i.path.clone()));
-    v.extend(report.intrinsics_file.clone());
-    v
-}
-
-/// Whether `detections.json` can be reused: newer than every input, same schema, same photos.
-fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detections, String> {
-    let Some(t) = mtime(path) else {
+/// Whether `detections.json` can be reused: made from inputs of the same content (`now`), same
+/// schema, same photos.
+fn reusable(
+    path: &Path,
+    report: &SessionReport,
+    now: &Inputs,
+) -> std::result::Result<Detections, String> {
+    if !path.is_file() {
         return Err("no detections.json yet".into());
-    };
-    for p in &inputs(report) {
-        match mtime(p) {
-            Some(m) if m < t => {}
-            _ => {
-                return Err(format!(
-                    "{} is newer than detections.json",
-                    p.file_name().unwrap_or_default().to_string_lossy()
-                ))
-            }
-        }
     }
     let d: Detections = crate::formats::output::read_json(path).map_err(|e| e.to_string())?;
     if d.schema != detections::SCHEMA {
@@ -73,17 +58,28 @@ fn reusable(path: &Path, report: &SessionReport) -> std::result::Result<Detectio
     if !same || d.projection != proj {
         return Err("detections.json describes other photos or another camera".into());
     }
+    if let Some(why) = fingerprint::differs(&d.inputs, now) {
+        return Err(format!("detections.json is stale: {why}"));
+    }
     Ok(d)
 }
 
 /// Check the session, reuse or run detection, decode and sample.
 pub fn load(opts: &Options) -> Result<Loaded> {
     let t0 = Instant::now();
-    load_inspected(opts, session::inspect(&opts.session)?, t0)
+    let report = session::inspect(&opts.session)?;
+    let now = fingerprint::of_files(&report.input_files())?;
+    load_inspected(opts, report, now, t0)
 }
 
 /// [`load`] for a session already inspected (at `t0`).
-pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant) -> Result<Loaded> {
+/// `now`: the inputs' fingerprints ([`SessionReport::input_files`]).
+pub(super) fn load_inspected(
+    opts: &Options,
+    report: SessionReport,
+    now: Inputs,
+    t0: Instant,
+) -> Result<Loaded> {
     let (sess, _) = Session::load(&report.session_file)?;
     let mut timings = Timings {
         inspect_s: t0.elapsed().as_secs_f64(),
@@ -112,11 +108,11 @@ pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant)
     let reuse = if opts.redetect {
         Err("--redetect".to_string())
     } else {
-        reusable(&detections_path, &report)
+        reusable(&detections_path, &report, &now)
     };
     let detections = match reuse {
         Ok(d) => {
-            skipped.push("detection: detections.json reused (newer than its inputs)".into());
+            skipped.push("detection: detections.json reused (its inputs unchanged)".into());
             d
         }
         Err(why) => {
@@ -131,6 +127,11 @@ pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant)
         }
     };
     timings.detect_s = t1.elapsed().as_secs_f64();
+    let mut inputs = now;
+    inputs.insert(
+        detections_path.display().to_string(),
+        fingerprint::of_file(&detections_path)?,
+    );
     // One light per photo: each photo is turned so that its light (from its own highlights)
     // lies on the first photo's, the material is fitted in that common frame, and the light's
     // prior is the photos' lights combined (`observe::light_frames`).
@@ -224,6 +225,7 @@ pub(super) fn load_inspected(opts: &Options, report: SessionReport, t0: Instant)
         alpha,
         skipped,
         timings,
+        inputs,
     })
 }
 
@@ -249,10 +251,14 @@ pub fn fingerprint(opts: &Options) -> String {
     )
 }
 
-/// A fit.json that can stand for this run: newer than session.json, the photos, the intrinsics
-/// and detections.json, of this schema, and written with the same options. Not with --redetect
-/// or --plots (figures need the pixels).
-pub(super) fn cached(opts: &Options, report: &SessionReport) -> Option<(FitFile, PathBuf)> {
+/// A fit.json that can stand for this run: made from inputs of the same content (`now`, and
+/// detections.json as it is), of this schema, and written with the same options. Not with
+/// --redetect or --plots (figures need the pixels).
+pub(super) fn cached(
+    opts: &Options,
+    report: &SessionReport,
+    now: &Inputs,
+) -> Option<(FitFile, PathBuf)> {
     if opts.redetect || opts.plots.is_some() {
         return None;
     }
@@ -260,12 +266,17 @@ pub(super) fn cached(opts: &Options, report: &SessionReport) -> Option<(FitFile,
         .out
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("fit.json"));
-    let t = mtime(&out)?;
-    let mut files = inputs(report);
-    files.push(report.session_file.with_file_name("detections.json"));
-    if !files.iter().all(|p| mtime(p).is_some_and(|m| m < t)) {
+    if !out.is_file() {
         return None;
     }
     let f: FitFile = crate::formats::output::read_json(&out).ok()?;
-    (f.schema == SCHEMA && f.options == fingerprint(opts)).then_some((f, out))
+    if f.schema != SCHEMA || f.options != fingerprint(opts) {
+        return None;
+    }
+    let mut now = now.clone();
+    let det = report.session_file.with_file_name("detections.json");
+    now.insert(det.display().to_string(), fingerprint::of_file(&det).ok()?);
+    fingerprint::differs(&f.inputs, &now)
+        .is_none()
+        .then_some((f, out))
 }

@@ -2,8 +2,8 @@
 //! (schema `workbench.fit/1`).
 //!
 //! Runs what is needed: the session is checked ([`crate::formats::session::inspect`]), `detections.json` is
-//! reused when it is newer than every input (session.json, the photos, the intrinsics) and
-//! describes the same photos, else detection runs ([`crate::detect`]); the photos are decoded and
+//! reused when every input it records (session.json, the photos, the intrinsics) has the same
+//! content now ([`crate::formats::fingerprint`]) and it describes the same photos, else detection runs ([`crate::detect`]); the photos are decoded and
 //! sampled ([`crate::fit::observe`]); then the joint fit ([`crate::fit::joint`]) or the paper's baseline
 //! ([`crate::fit::paper`]). Optional: model extensions chosen by held-out error, a held-out sphere's
 //! prediction error, and figures.
@@ -21,7 +21,7 @@ use crate::formats::session::{self, LightMode, Session, SessionReport};
 use crate::model::{idx, LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
-use std::time::{Instant, SystemTime};
+use std::time::Instant;
 
 mod choice;
 mod file;
@@ -154,11 +154,12 @@ fn distinct_radii(spheres: &[&SphereData]) -> Vec<f64> {
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
     let report = session::inspect(&opts.session)?;
-    if let Some((mut f, out)) = cached(opts, &report) {
+    let now = crate::formats::fingerprint::of_files(&report.input_files())?;
+    if let Some((mut f, out)) = cached(opts, &report, &now) {
         f.skipped.insert(
             0,
             format!(
-                "solve: {} reused (newer than its inputs, same options; {:.3} s instead of {:.2} s)",
+                "solve: {} reused (its inputs unchanged by content, same options; {:.3} s instead of {:.2} s)",
                 out.display(),
                 t0.elapsed().as_secs_f64(),
                 f.timings.total_s
@@ -166,7 +167,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         );
         return Ok(f);
     }
-    let mut l = load_inspected(opts, report, t0)?;
+    let mut l = load_inspected(opts, report, now, t0)?;
     // Stages after loading (detection shows its own bar): fit, predictions, output.
     let pb = crate::progress::bar(3, "solve", opts.quiet);
     pb.enable_steady_tick(std::time::Duration::from_millis(200));

@@ -174,3 +174,72 @@ fn bench_keeps_folders_it_did_not_make() {
         "mine"
     );
 }
+
+/// Reuse by content: a photo replaced by another with an old modification time (as `cp -p` or
+/// `rsync -a` leave it) makes solve detect and fit again; only touching the files does not.
+#[test]
+fn stale_results_are_never_reused_whatever_the_times() {
+    let tmp = tempfile::tempdir().unwrap();
+    let make = |name: &str, seed: &str| {
+        let s = tmp.path().join(name);
+        let (code, _, err) = wb(&[
+            "--quiet",
+            "synth",
+            "session",
+            "--out",
+            s.to_str().unwrap(),
+            "--size",
+            "480x320",
+            "--fx",
+            "520",
+            "--radii",
+            "20,15,12",
+            "--layout",
+            "row",
+            "--seed",
+            seed,
+        ]);
+        assert_eq!(code, 0, "{err}");
+        s
+    };
+    let (a, b) = (make("a", "1"), make("b", "2"));
+    let ao = a.to_str().unwrap();
+    let solve = || {
+        let (code, out, err) = wb(&["--quiet", "solve", "--joint", ao, "--no-jackknife"]);
+        assert!(code == 0 || code == 3, "{err}");
+        out
+    };
+    let first = solve();
+    assert!(first.contains("detection: ran"), "{first}");
+    // Touched: every file newer, nothing changed: both reused.
+    let photo = std::fs::read_dir(&a)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"))
+        .unwrap();
+    let old_time = std::fs::metadata(&photo).unwrap().modified().unwrap();
+    let now = std::time::SystemTime::now() + std::time::Duration::from_secs(5);
+    std::fs::File::options()
+        .write(true)
+        .open(&photo)
+        .unwrap()
+        .set_modified(now)
+        .unwrap();
+    let touched = solve();
+    assert!(touched.contains("fit.json reused"), "{touched}");
+    // Replaced by session b's photo of the same name, with the old time back.
+    let other = b.join(photo.file_name().unwrap());
+    std::fs::copy(&other, &photo).unwrap();
+    std::fs::File::options()
+        .write(true)
+        .open(&photo)
+        .unwrap()
+        .set_modified(old_time)
+        .unwrap();
+    let replaced = solve();
+    assert!(!replaced.contains("fit.json reused"), "{replaced}");
+    assert!(
+        replaced.contains("detections.json is stale:") && replaced.contains("has changed"),
+        "{replaced}"
+    );
+}
