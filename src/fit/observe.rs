@@ -11,7 +11,10 @@
 //! happened to be negative).
 //!
 //! Pixels whose row neighbours lie within 3σ of full scale are left out with the clipped ones: near
-//! clipping the noise is censored and what remains averages low.
+//! clipping the noise is censored and what remains averages low. Impulses are left out too (dust,
+//! a hot pixel, a Monte Carlo firefly): a channel more than 6σ + 20% of the level (50% in the
+//! highlight) from its row neighbours' mean, before pooling averages them into cells where the
+//! robust loss can no longer see them.
 //!
 //! The dark room's floor (stray light, the sensor's black level) is measured as the median of the
 //! pixels away from the spheres ([`background`]) and subtracted from every sample; where those
@@ -44,6 +47,9 @@ pub struct SphereData {
     pub pixels: usize,
     pub saturated: usize,
     pub edge: usize,
+    /// Pixels left out as impulses: outside the highlight, a channel more than [`IMPULSE_SIGMA`]
+    /// noise σ from the mean of its two row neighbours (dust, a hot pixel, a glint).
+    pub impulses: usize,
     /// Noise σ per channel at the sphere's median level (radiance units).
     pub noise: [f64; 3],
     /// The noise model per channel: σ² = a + b·L.
@@ -286,6 +292,15 @@ pub(crate) fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
 /// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
 /// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
 /// vectors are turned by its rotation (see [`light_frames`]).
+/// A pixel this many noise σ (of its difference from its neighbours' mean) away is an impulse
+/// ([`SphereData::impulses`]): a Gaussian deviate goes that far once in 10⁹ pixels.
+pub(crate) const IMPULSE_SIGMA: f64 = 6.0;
+/// … and this fraction of the neighbours' level: shading that is not smooth at the pixel scale
+/// (a rendered session's Monte Carlo noise, a textured surface) is not taken for impulses.
+pub(crate) const IMPULSE_FRACTION: f64 = 0.2;
+/// … within the highlight, where the lobe itself changes fast from pixel to pixel.
+pub(crate) const IMPULSE_FRACTION_HIGHLIGHT: f64 = 0.5;
+
 pub fn observe(
     report: &SessionReport,
     sess: &Session,
@@ -384,6 +399,7 @@ pub fn observe(
                 pixels: smp.len(),
                 saturated: 0,
                 edge: 0,
+                impulses: 0,
                 noise,
                 noise_model: model,
                 floor: floors[i],
@@ -418,6 +434,25 @@ pub fn observe(
                     }
                 }
                 let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
+                // An impulse: away from the highlight the shading is smooth from one pixel to the
+                // next, so a pixel far from its two neighbours' mean (whose difference has
+                // variance 1.5σ²) is not the sphere. A pooled cell would average it in, where
+                // the robust loss no longer sees it.
+                let fraction = if x.flags & samples::HIGHLIGHT == 0 {
+                    IMPULSE_FRACTION
+                } else {
+                    IMPULSE_FRACTION_HIGHLIGHT
+                };
+                if n == 2.0
+                    && (0..3).any(|c| {
+                        (x.radiance[c] - level[c]).abs()
+                            > IMPULSE_SIGMA * 1.5f64.sqrt() * sigma(c, level[c])
+                                + fraction * level[c].abs()
+                    })
+                {
+                    out.impulses += 1;
+                    continue;
+                }
                 // Near full scale the noise is censored (values pushed over it were clipped and
                 // left out), so the rest average low: leave out pixels whose neighbours' level
                 // is within 3σ of clipping.

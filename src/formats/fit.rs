@@ -90,6 +90,10 @@ pub struct SphereRmse {
     pub pixels: usize,
     pub saturated: usize,
     pub edge: usize,
+    /// Pixels left out as impulses (a channel 6σ from its row neighbours' mean, outside the
+    /// highlight).
+    #[serde(default)]
+    pub impulses: usize,
     /// Pixel noise σ per channel (radiance units), as measured.
     pub noise: [f64; 3],
     /// The photo's dark floor, subtracted before fitting (null: not measurable).

@@ -27,6 +27,7 @@ pub(super) fn predictions(
                 pixels: s.obs.len(),
                 saturated: s.saturated,
                 edge: s.edge,
+                impulses: s.impulses,
                 noise: s.noise,
                 floor: s.floor,
                 rmse: p.rmse,

@@ -111,6 +111,12 @@ fn run_case(
     for n in &f.notes {
         println!("  note {n}");
     }
+    for sp in &f.rmse.spheres {
+        println!(
+            "  sphere {} mm: {} pixels ({} impulses, {} saturated, {} edge left out), rel. RMSE {:.4}",
+            sp.radius_mm, sp.pixels, sp.impulses, sp.saturated, sp.edge, sp.rel_rmse
+        );
+    }
     if f.convergence.converged && se <= sigma_tol && le <= light_tol_deg {
         return (Outcome::Accurate, Some(f));
     }
@@ -140,6 +146,22 @@ fn run_case(
             100.0 * se
         ),
     }
+}
+
+/// The largest σ0 error in units of its stated standard error (each channel), printed.
+fn sigma_error_in_std(f: &FitFile, truth: [f64; 3], name: &str) -> f64 {
+    let worst = (0..3)
+        .map(|c| {
+            let p = f
+                .parameters
+                .iter()
+                .find(|p| p.name == ["sigma0_r", "sigma0_g", "sigma0_b"][c])
+                .unwrap();
+            (f.sigma0_mm[c] - truth[c]).abs() / p.std
+        })
+        .fold(0.0, f64::max);
+    println!("{name}: σ0 off by at most {worst:.2} of its stated std");
+    worst
 }
 
 fn accurate(o: &(Outcome, Option<FitFile>), name: &str) {
@@ -239,7 +261,8 @@ fn index_of_refraction_from_1_0001_to_3() {
     let t = config(|_| {}).material.sigma0_mm;
     assert!((0..3).all(|c| (f.sigma0_mm[c] - t[c]).abs() < 0.03 * t[c]));
     assert!(f.notes.iter().any(|n| n.contains("prior σ from the prior")));
-    // η = 3 against the default prior 1.45 ± 0.05: σ0 is right, η is not, and a note says so.
+    // η = 3 against the default prior 1.45 ± 0.05: σ0 is right (within 3%, 1.06% measured, and
+    // within 3 of its stated std), η is not, and a note says so.
     let o = run_case(
         "eta 3",
         config(|c| c.material.eta = 3.0),
@@ -249,6 +272,12 @@ fn index_of_refraction_from_1_0001_to_3() {
         0.2,
     );
     let f = o.1.as_ref().unwrap();
+    assert!(
+        (0..3).all(|c| (f.sigma0_mm[c] - t[c]).abs() < 0.03 * t[c]),
+        "{:?}",
+        f.sigma0_mm
+    );
+    assert!(sigma_error_in_std(f, t, "eta 3") < 3.0);
     assert!(
         f.notes.iter().any(|n| n.contains("prior σ from the prior")),
         "{:?}",
@@ -301,19 +330,20 @@ fn grazing_camera_and_back_lights() {
         azimuth: az.to_radians(),
         elevation: el.to_radians(),
     };
-    // Grazing: the terminator runs through the middle of every sphere; σ0 within 5% (3.6%
-    // measured at this size — biased, with a stated error of 0.2%: a known weakness).
-    accurate(
-        &run_case(
-            "grazing light",
-            config(|c| c.light = light(89.0, 0.0)),
-            None,
-            |_| {},
-            0.05,
-            0.3,
-        ),
+    // Grazing: the terminator runs through the middle of every sphere; σ0 is biased by 3.1%
+    // (measured), which the formal standard error (0.15%) would hide: the stated one (the
+    // jackknife's, 1.5–2.6%) covers it — 1.2 std measured, 3 allowed — and σ0 within 5%.
+    let o = run_case(
         "grazing light",
+        config(|c| c.light = light(89.0, 0.0)),
+        None,
+        |_| {},
+        0.05,
+        0.3,
     );
+    accurate(&o, "grazing light");
+    let truth = config(|_| {}).material.sigma0_mm;
+    assert!(sigma_error_in_std(o.1.as_ref().unwrap(), truth, "grazing light") < 3.0);
     // Light exactly at the camera: no terminator, θ = φ everywhere (σ0 13% off measured): flagged.
     let o = run_case(
         "light at the camera",
@@ -386,9 +416,9 @@ fn saturation() {
 }
 
 /// Replace 5% of the sphere pixels (brighter than 2% of full scale) of every photo with random
-/// values.
-fn outliers(dir: &Path) {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+/// values drawn from `seed`.
+fn outliers(dir: &Path, seed: u64) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     for e in std::fs::read_dir(dir).unwrap() {
         let p = e.unwrap().path();
         if p.extension().is_none_or(|x| x != "png") {
@@ -422,20 +452,37 @@ fn heavy_noise_and_outliers() {
         "{:?}",
         o.0
     );
-    // 5% outlier pixels: σ0 within 6% (4.7% measured here; 0.5% with another draw of outliers
-    // on the same session).
-    accurate(
-        &run_case(
-            "5% outliers",
+    // 5% outlier pixels, ten draws. Measured: σ0 off by 1–21% (median 6%, always high), the light
+    // by 0.04–1.04°, with the impulses left out (src/fit/observe.rs; the residuals fall from
+    // about 10% to 5% of the data, σ0 barely moves: the bias is not the fitted pixels'). The fit
+    // says so: its stated std covers every error (at most 1.9 of it; 3 allowed).
+    let mut errors = vec![];
+    for seed in 1..=10u64 {
+        let name = format!("5% outliers, seed {seed}");
+        let tamper = |d: &Path| outliers(d, seed);
+        let o = run_case(
+            &name,
             config(|_| {}),
-            Some(&outliers),
+            Some(&tamper),
             |_| {},
-            0.06,
-            0.2,
-        ),
-        "5% outliers",
-    );
+            WORST_OUTLIER_ERROR,
+            1.5,
+        );
+        accurate(&o, &name);
+        let f = o.1.unwrap();
+        let truth = config(|_| {}).material.sigma0_mm;
+        errors.push(
+            (0..3)
+                .map(|c| (f.sigma0_mm[c] - truth[c]).abs() / truth[c])
+                .fold(0.0, f64::max),
+        );
+        assert!(sigma_error_in_std(&f, truth, &name) < 3.0, "{name}");
+    }
+    println!("5% outliers: σ0 errors over ten draws {errors:.4?}");
 }
+
+/// The largest σ0 error accepted over the ten outlier draws (21% measured).
+const WORST_OUTLIER_ERROR: f64 = 0.3;
 
 #[test]
 fn one_radius_and_two_identical_radii() {
