@@ -152,11 +152,12 @@ fn exposure(t: f64, iso: f64, n: f64) -> f64 {
     t * (iso / 100.0) * (8.0 / n).powi(2) * 30.0
 }
 
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("workbench-exif-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh temporary folder of the test's own (removed when the guard drops).
+fn dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("workbench-exif-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// A 64×48 grey JPEG carrying `block` as its EXIF.
@@ -177,11 +178,11 @@ fn jpeg(path: &Path, block: Vec<u8>) {
 }
 
 fn read(name: &str, block: Vec<u8>) -> ExifInfo {
-    let d = dir(name);
+    let guard = dir(name);
+    let d = guard.path();
     let p = d.join("a.jpg");
     jpeg(&p, block);
     let info = ExifInfo::read(&p).unwrap().expect("the JPEG has EXIF");
-    let _ = std::fs::remove_dir_all(&d);
     info
 }
 
@@ -304,7 +305,8 @@ fn unreadable_block_loads_without_settings() {
 
 #[test]
 fn iso_and_f_number_enter_the_exposure_scale() {
-    let d = dir("iso");
+    let guard = dir("iso");
+    let d = guard.path();
     jpeg(&d.join("a.jpg"), tiff(camera_ifd0(), camera_exif(100), 0));
     jpeg(&d.join("b.jpg"), tiff(camera_ifd0(), camera_exif(200), 0));
     let mut exif = camera_exif(100);
@@ -344,12 +346,12 @@ fn iso_and_f_number_enter_the_exposure_scale() {
         "{err}"
     );
     assert_eq!(err.lines().count(), 1, "{err}");
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 #[test]
 fn orientation_turns_the_photo_and_its_size() {
-    let d = dir("orientation");
+    let guard = dir("orientation");
+    let d = guard.path();
     let mut ifd0 = camera_ifd0();
     ifd0.push(short(ORIENTATION, 6));
     jpeg(&d.join("a.jpg"), tiff(ifd0, camera_exif(100), 0));
@@ -359,7 +361,6 @@ fn orientation_turns_the_photo_and_its_size() {
     let img = workbench::formats::photo::load_linear_rgb(&d.join("a.jpg"), None).unwrap();
     assert_eq!((img.width, img.height), (48, 64));
     assert!(r.images[0].exif_notes[0].contains("Orientation 6"));
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// A 16-bit RGB TIFF with its settings in an Exif sub-IFD, as dcraw -4 -T or LibRaw's dcraw_emu
@@ -405,7 +406,8 @@ fn tiff16(path: &Path, w: u32, h: u32, px: &[u16]) {
 
 #[test]
 fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
-    let d = dir("tiff16");
+    let guard = dir("tiff16");
+    let d = guard.path();
     let (w, h) = (40u32, 36u32);
     let px: Vec<u16> = (0..w * h * 3).map(|i| (i * 37 % 65536) as u16).collect();
     tiff16(&d.join("a.tiff"), w, h, &px);
@@ -426,5 +428,4 @@ fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
             "sample {k}: {a} vs {b}"
         );
     }
-    let _ = std::fs::remove_dir_all(&d);
 }

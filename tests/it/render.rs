@@ -279,9 +279,24 @@ fn command_line_lut_render_and_check() {
     for sp in spheres {
         assert!(sp["rel_rmse"].as_f64().unwrap() < 2e-3, "{sp}");
     }
-    assert!(
-        s.join("render-check/sphere-s-0.png").is_file()
-            || std::fs::read_dir(s.join("render-check")).unwrap().count() == 3
+    // One picture per sphere, named after its photo and index, and the JSON: nothing else.
+    for sp in spheres {
+        let stem = Path::new(sp["image"].as_str().unwrap())
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let png = s.join(format!("render-check/sphere-{stem}-{}.png", sp["index"]));
+        let img = image::open(&png).unwrap_or_else(|e| panic!("{}: {e}", png.display()));
+        assert!(
+            img.width() > 2 * img.height(),
+            "{}: not a strip",
+            png.display()
+        );
+    }
+    assert_eq!(
+        std::fs::read_dir(s.join("render-check")).unwrap().count(),
+        spheres.len() + 1
     );
 
     // A PLY mesh in metres.

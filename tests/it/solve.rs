@@ -29,10 +29,19 @@ fn truth(dir: &Path) -> SessionTruth {
     serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap()
 }
 
-/// The default session (five radii, 1% noise, 16-bit PNG), generated once for the tests here.
-fn default_session() -> &'static Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| make(SessionConfig::default())).path()
+/// The default session (five radii, 1% noise, 16-bit PNG): generated once, and copied into a
+/// temporary folder of each test's own (tests run in parallel and write beside session.json).
+fn default_session() -> tempfile::TempDir {
+    static TEMPLATE: OnceLock<tempfile::TempDir> = OnceLock::new();
+    let template = TEMPLATE.get_or_init(|| make(SessionConfig::default()));
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(template.path()).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_file() {
+            std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    dir
 }
 
 fn solve_with(dir: &Path, name: &str, f: impl FnOnce(&mut Options)) -> FitFile {
@@ -58,7 +67,8 @@ fn worst(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 
 #[test]
 fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let t = truth(dir);
     let f = solve_with(dir, "fit-joint.json", |_| {});
     let (es, ea, el) = (
@@ -113,9 +123,22 @@ fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
             assert!(!l.within_tolerance, "{l:?}");
         }
     }
-    // What was reused and skipped is listed.
-    assert!(f.skipped.iter().any(|s| s.starts_with("calibration")));
-    assert!(f.skipped.iter().any(|s| s.starts_with("detection")));
+    // What was reused and skipped is listed: the camera from the session's intrinsics, and the
+    // detection run because there was none yet.
+    assert!(
+        f.skipped
+            .iter()
+            .any(|s| s.starts_with("calibration: camera from") && s.contains("intrinsics.json")),
+        "{:?}",
+        f.skipped
+    );
+    assert!(
+        f.skipped
+            .iter()
+            .any(|s| s == "detection: ran (no detections.json yet)"),
+        "{:?}",
+        f.skipped
+    );
     // Stages record their cost history.
     for st in &f.convergence.stages {
         assert!(!st.cost_history.is_empty());
@@ -143,7 +166,8 @@ fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
 
 #[test]
 fn a_known_irradiance_makes_eta_measurable() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let t = truth(dir);
     // The synthetic light's irradiance is 1 in radiance units (ks = 1 is the physical lobe).
     let f = solve_with(dir, "fit-irradiance.json", |o| o.irradiance = Some(1.0));
@@ -162,7 +186,8 @@ fn a_known_irradiance_makes_eta_measurable() {
 
 #[test]
 fn a_bad_start_still_converges() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let t = truth(dir);
     // Light 30° off the truth (70°, 20°) and σ0 ten times too large.
     let f = solve_with(dir, "fit-bad-start.json", |o| {
@@ -265,7 +290,8 @@ fn paper_baseline_and_holdout() {
 
 #[test]
 fn every_pixel_and_the_chosen_reduction_agree() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let auto = solve_with(dir, "fit-auto.json", |_| {});
     let all = solve_with(dir, "fit-all.json", |o| o.reduction = Reduction::None);
     let coarse = solve_with(dir, "fit-4deg.json", |o| {
@@ -338,7 +364,8 @@ fn one_radius_still_fits_with_a_wider_uncertainty() {
             two_gaussian: false,
         })
     });
-    let five = solve_with(default_session(), "fit-five.json", |_| {});
+    let guard = default_session();
+    let five = solve_with(guard.path(), "fit-five.json", |_| {});
     println!(
         "one radius: σ0 {:.4?} ± {:.4?}; five radii ± {:.4?}",
         f.sigma0_mm, f.std.sigma0_mm, five.std.sigma0_mm
@@ -383,7 +410,8 @@ fn extensions_are_chosen_by_held_out_error() {
     assert!(mc.chosen.contains("sigma-exponent"), "{}", mc.chosen);
     assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 0.05);
     // On plain data the plain model is kept.
-    let plain = solve_with(default_session(), "fit-ext.json", |o| {
+    let guard = default_session();
+    let plain = solve_with(guard.path(), "fit-ext.json", |o| {
         o.extensions = ExtensionChoice::Auto
     });
     let pc = plain.model_choice.as_ref().unwrap();
@@ -420,7 +448,8 @@ fn svg_has(dir: &Path, name: &str, texts: &[&str]) {
 
 #[test]
 fn figures_are_written_and_redrawn_from_fit_json() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let plots: PathBuf = dir.join("plots");
     let fit_path = dir.join("fit-plots.json");
     let f = solve_with(dir, "fit-plots.json", |o| {
@@ -536,7 +565,8 @@ fn figures_are_written_and_redrawn_from_fit_json() {
 
 #[test]
 fn an_unchanged_rerun_reuses_fit_json() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let first = solve_with(dir, "fit-cache.json", |_| {});
     assert!(!first.skipped.iter().any(|s| s.starts_with("solve:")));
     let second = solve_with(dir, "fit-cache.json", |_| {});
@@ -634,7 +664,8 @@ fn one_light_per_photo() {
 /// fitted parameter agrees within a hundredth of its standard error.
 #[test]
 fn tabulated_cdrf_fits_as_the_closed_form() {
-    let dir = default_session();
+    let guard = default_session();
+    let dir = guard.path();
     let a = solve_with(dir, "fit-table.json", |o| o.jackknife = false);
     let b = solve_with(dir, "fit-closed.json", |o| {
         o.jackknife = false;
