@@ -182,8 +182,7 @@ fn read(name: &str, block: Vec<u8>) -> ExifInfo {
     let d = guard.path();
     let p = d.join("a.jpg");
     jpeg(&p, block);
-    let info = ExifInfo::read(&p).unwrap().expect("the JPEG has EXIF");
-    info
+    ExifInfo::read(&p).unwrap().expect("the JPEG has EXIF")
 }
 
 fn session(d: &Path, files: &[&str]) -> PathBuf {
@@ -313,7 +312,7 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     exif[1] = rational(F_NUMBER, 4, 1);
     jpeg(&d.join("c.jpg"), tiff(camera_ifd0(), exif, 0));
     let r =
-        workbench::formats::session::inspect(&session(&d, &["a.jpg", "b.jpg", "c.jpg"])).unwrap();
+        workbench::formats::session::inspect(&session(d, &["a.jpg", "b.jpg", "c.jpg"])).unwrap();
     let x: Vec<f64> = r.images.iter().map(|i| i.exposure.unwrap()).collect();
     // ISO 200 is twice ISO 100; f/4 is (5.6/4)² = 1.96 times f/5.6.
     assert!((x[1] / x[0] - 2.0).abs() < 1e-12, "{x:?}");
@@ -324,13 +323,13 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let mut exif = camera_exif(100);
     exif.remove(2);
     jpeg(&d.join("n.jpg"), tiff(camera_ifd0(), exif, 0));
-    let err = workbench::formats::session::inspect(&session(&d, &["a.jpg", "b.jpg", "n.jpg"]))
+    let err = workbench::formats::session::inspect(&session(d, &["a.jpg", "b.jpg", "n.jpg"]))
         .unwrap_err()
         .to_string();
     assert!(err.contains("n.jpg") && err.contains("ISO"), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
     // Beside photos that agree (ISO 100): taken as theirs, with a note.
-    let r = workbench::formats::session::inspect(&session(&d, &["a.jpg", "n.jpg"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(d, &["a.jpg", "n.jpg"])).unwrap();
     assert!((r.images[1].exposure.unwrap() - r.images[0].exposure.unwrap()).abs() < 1e-15);
     assert!(r.images[1].exif_notes.iter().any(|n| n.contains("no ISO")));
 
@@ -338,7 +337,7 @@ fn iso_and_f_number_enter_the_exposure_scale() {
     let mut exif = camera_exif(100);
     exif[0] = rational(EXPOSURE_TIME, 1, 0);
     jpeg(&d.join("z.jpg"), tiff(camera_ifd0(), exif, 0));
-    let err = workbench::formats::session::inspect(&session(&d, &["a.jpg", "z.jpg"]))
+    let err = workbench::formats::session::inspect(&session(d, &["a.jpg", "z.jpg"]))
         .unwrap_err()
         .to_string();
     assert!(
@@ -355,7 +354,7 @@ fn orientation_turns_the_photo_and_its_size() {
     let mut ifd0 = camera_ifd0();
     ifd0.push(short(ORIENTATION, 6));
     jpeg(&d.join("a.jpg"), tiff(ifd0, camera_exif(100), 0));
-    let r = workbench::formats::session::inspect(&session(&d, &["a.jpg"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(d, &["a.jpg"])).unwrap();
     // Stored 64×48, shown (and decoded) 48×64.
     assert_eq!((r.images[0].width, r.images[0].height), (48, 64));
     let img = workbench::formats::photo::load_linear_rgb(&d.join("a.jpg"), None).unwrap();
@@ -411,7 +410,7 @@ fn raw_conversion_tiff_loads_as_linear_with_its_exposure() {
     let (w, h) = (40u32, 36u32);
     let px: Vec<u16> = (0..w * h * 3).map(|i| (i * 37 % 65536) as u16).collect();
     tiff16(&d.join("a.tiff"), w, h, &px);
-    let r = workbench::formats::session::inspect(&session(&d, &["a.tiff"])).unwrap();
+    let r = workbench::formats::session::inspect(&session(d, &["a.tiff"])).unwrap();
     let im = &r.images[0];
     assert_eq!((im.bits, im.linear, im.width, im.height), (16, true, w, h));
     let x = im.exposure.unwrap();
