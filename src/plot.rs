@@ -520,7 +520,7 @@ impl Figure {
     }
 
     /// The figure as SVG text (rasters embedded as PNG).
-    pub(crate) fn to_svg(&self) -> Result<String, String> {
+    pub fn to_svg(&self) -> Result<String, String> {
         let mut svg = String::new();
         let mut rasters = Rasters {
             svg: true,
@@ -537,7 +537,7 @@ impl Figure {
     }
 
     /// The figure as RGB8 pixels.
-    pub(crate) fn to_rgb(&self) -> Result<Vec<u8>, String> {
+    pub fn to_rgb(&self) -> Result<Vec<u8>, String> {
         let (w, h) = self.size;
         let mut buf = vec![255u8; (w * h * 3) as usize];
         {

@@ -1,4 +1,6 @@
-//! fit.json as `workbench plot` reads it: parse, validate, derive the parameters. Must never panic.
+//! fit.json as `workbench plot` reads it: parse, validate, derive the parameters, and draw every
+//! figure that needs no photo (the correlation matrix, the per-radius curves) as PNG pixels.
+//! Must never panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use workbench::formats::fit::FitFile;
@@ -12,6 +14,9 @@ fuzz_target!(|data: &[u8]| {
                 if let Some(b) = &f.baseline {
                     let _ = b.params_for(r);
                 }
+            }
+            for named in workbench::figures::fitplot::figures(&f, &[]) {
+                let _ = named.figure.to_rgb();
             }
         }
     }
