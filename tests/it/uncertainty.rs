@@ -220,9 +220,14 @@ fn pbr_session_defaults(name: &str, expect_held: bool, heldout_measured: [f64; 5
         .join("datasets")
         .join(name);
     let dir = tempfile::tempdir().unwrap();
+    // The session as the repository holds it: what an earlier run wrote beside it (detections,
+    // overlays, a fit) is not copied.
     for e in std::fs::read_dir(&src).unwrap() {
         let p = e.unwrap().path();
-        std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        if p.is_file() && name != "detections.json" && name != "fit.json" {
+            std::fs::copy(&p, dir.path().join(&name)).unwrap();
+        }
     }
     let truth: workbench::synth::volpath::PbrTruth =
         serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
