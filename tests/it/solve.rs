@@ -93,7 +93,8 @@ fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
     assert!(ea < 0.01, "albedo {ea}");
     assert!(el < 0.1, "light {el}°");
     let sp = f.specular.unwrap();
-    assert!(rel(sp.alpha, t.specular.alpha) < 0.05, "α {}", sp.alpha);
+    // α within 1.5% (0.5% measured).
+    assert!(rel(sp.alpha, t.specular.alpha) < 0.015, "α {}", sp.alpha);
     // ks carries F(η) with η at its prior: within the prior's reach.
     assert!(rel(sp.ks, t.specular.ks) < 0.1, "ks {}", sp.ks);
     // η rests on its prior (1.45 ± 0.05) and on T(φ): within the prior's width of the truth.
@@ -228,7 +229,8 @@ fn paper_baseline_and_holdout() {
             r.radius_mm, r.sigma0_mm, r.sigma_rad, r.albedo
         );
         assert!((r.sigma_rad[1] * r.radius_mm - r.sigma0_mm[1]).abs() < 1e-9);
-        assert!(worst(&r.sigma0_mm, &t.sigma0_mm) < 0.1);
+        // Each radius within 6% (2.1% measured at worst).
+        assert!(worst(&r.sigma0_mm, &t.sigma0_mm) < 0.06);
     }
     assert!(p.specular.is_none());
     assert_eq!(p.method, Method::Paper);
