@@ -131,19 +131,25 @@ fn machine() -> String {
 /// The file that marks a folder as made by `workbench bench` (and so deleted by its next run).
 const MARK: &str = ".workbench-bench";
 
-/// Make way for a folder the benchmark writes: one it made before (it holds [`MARK`]) is
-/// deleted; anything else there is an error, never deleted.
-fn fresh_dir(dir: &Path) -> Result<()> {
-    if !dir.exists() {
-        return Ok(());
-    }
-    if !dir.join(MARK).is_file() {
+/// A folder the benchmark may replace: absent, or made by an earlier run (it holds [`MARK`]).
+fn replaceable(dir: &Path) -> Result<()> {
+    if dir.exists() && !dir.join(MARK).is_file() {
         return Err(Error::invalid(
             dir,
             "exists and was not made by workbench bench: it would be overwritten; choose another --out or move it",
         ));
     }
-    std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))
+    Ok(())
+}
+
+/// Make way for a folder the benchmark writes: one it made before is deleted; anything else
+/// there is an error, never deleted.
+fn fresh_dir(dir: &Path) -> Result<()> {
+    replaceable(dir)?;
+    if dir.exists() {
+        std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    Ok(())
 }
 
 fn session_dir(opts: &BenchOptions, name: &str) -> PathBuf {
@@ -172,9 +178,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         .map(|d| session_dir(opts, &d.name))
         .chain([checkerboard_dir(opts)])
     {
-        if dir.exists() && !dir.join(MARK).is_file() {
-            fresh_dir(&dir)?;
-        }
+        replaceable(&dir)?;
     }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let settings = reductions();

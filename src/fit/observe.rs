@@ -47,8 +47,9 @@ pub struct SphereData {
     pub pixels: usize,
     pub saturated: usize,
     pub edge: usize,
-    /// Pixels left out as impulses: outside the highlight, a channel more than [`IMPULSE_SIGMA`]
-    /// noise σ from the mean of its two row neighbours (dust, a hot pixel, a glint).
+    /// Pixels left out as impulses: a channel more than [`IMPULSE_SIGMA`] noise σ plus
+    /// [`IMPULSE_FRACTION`] of the level ([`IMPULSE_FRACTION_HIGHLIGHT`] in the highlight) from
+    /// the mean of its two row neighbours (dust, a hot pixel, a firefly).
     pub impulses: usize,
     /// Noise σ per channel at the sphere's median level (radiance units).
     pub noise: [f64; 3],
@@ -288,10 +289,6 @@ pub(crate) fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
     })
 }
 
-/// Decode the session's photos and collect the observations of every sphere of `det`, with
-/// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
-/// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
-/// vectors are turned by its rotation (see [`light_frames`]).
 /// A pixel this many noise σ (of its difference from its neighbours' mean) away is an impulse
 /// ([`SphereData::impulses`]): a Gaussian deviate goes that far once in 10⁹ pixels.
 pub(crate) const IMPULSE_SIGMA: f64 = 6.0;
@@ -301,6 +298,10 @@ pub(crate) const IMPULSE_FRACTION: f64 = 0.2;
 /// … within the highlight, where the lobe itself changes fast from pixel to pixel.
 pub(crate) const IMPULSE_FRACTION_HIGHLIGHT: f64 = 0.5;
 
+/// Decode the session's photos and collect the observations of every sphere of `det`, with
+/// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
+/// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
+/// vectors are turned by its rotation (see [`light_frames`]).
 pub fn observe(
     report: &SessionReport,
     sess: &Session,
@@ -434,8 +435,8 @@ pub fn observe(
                     }
                 }
                 let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
-                // An impulse: away from the highlight the shading is smooth from one pixel to the
-                // next, so a pixel far from its two neighbours' mean (whose difference has
+                // An impulse: the shading is smooth from one pixel to the next (the highlight
+                // less so), so a pixel far from its two neighbours' mean (whose difference has
                 // variance 1.5σ²) is not the sphere. A pooled cell would average it in, where
                 // the robust loss no longer sees it.
                 let fraction = if x.flags & samples::HIGHLIGHT == 0 {

@@ -90,8 +90,8 @@ pub struct SphereRmse {
     pub pixels: usize,
     pub saturated: usize,
     pub edge: usize,
-    /// Pixels left out as impulses (a channel 6σ from its row neighbours' mean, outside the
-    /// highlight).
+    /// Pixels left out as impulses (a channel more than 6σ + 20% of the level, 50% in the
+    /// highlight, from its row neighbours' mean).
     #[serde(default)]
     pub impulses: usize,
     /// Pixel noise σ per channel (radiance units), as measured.

@@ -103,19 +103,14 @@ pub(crate) fn choose_extensions(
             ((d / o.max(1.0)).sqrt(), jf.fit.converged)
         })
         .collect();
+    // `pairs` runs candidate by candidate: each candidate's refits are one chunk.
     let results: Vec<Candidate> = candidates
         .iter()
-        .enumerate()
-        .map(|(c, ext)| {
-            let mine: Vec<&(f64, bool)> = (0..pairs.len())
-                .filter(|&i| pairs[i].0 == c)
-                .map(|i| &refits[i])
-                .collect();
-            Candidate {
-                extensions: ext.name(),
-                heldout_rel_rmse: mine.iter().map(|r| r.0).sum::<f64>() / radii.len() as f64,
-                converged: mine.iter().all(|r| r.1),
-            }
+        .zip(refits.chunks(radii.len()))
+        .map(|(ext, mine)| Candidate {
+            extensions: ext.name(),
+            heldout_rel_rmse: mine.iter().map(|r| r.0).sum::<f64>() / radii.len() as f64,
+            converged: mine.iter().all(|r| r.1),
         })
         .collect();
     let plain = results[0].heldout_rel_rmse;

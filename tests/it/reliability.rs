@@ -81,17 +81,36 @@ fn kill_everywhere(dir: &Path, args: &[&str], changed: &str) -> usize {
     kills
 }
 
+/// A synthetic 480×320 row of three spheres (20, 15, 12 mm) drawn with `seed`, in `<tmp>/<name>`.
+fn row_session(tmp: &Path, name: &str, seed: &str) -> std::path::PathBuf {
+    let s = tmp.join(name);
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "session",
+        "--out",
+        s.to_str().unwrap(),
+        "--size",
+        "480x320",
+        "--fx",
+        "520",
+        "--radii",
+        "20,15,12",
+        "--layout",
+        "row",
+        "--seed",
+        seed,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    s
+}
+
 /// solve with figures: fit.json and every figure, killed at 1, 2, 4, … written files.
 #[test]
 fn solve_killed_anywhere_keeps_the_previous_set() {
     let tmp = tempfile::tempdir().unwrap();
-    let s = tmp.path().join("s");
+    let s = row_session(tmp.path(), "s", "1");
     let so = s.to_str().unwrap();
-    let (code, _, err) = wb(&[
-        "--quiet", "synth", "session", "--out", so, "--size", "480x320", "--fx", "520", "--radii",
-        "20,15,12", "--layout", "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
     let plots = s.join("plots");
     let po = plots.to_str().unwrap();
     let (code, _, err) = wb(&["--quiet", "solve", "--joint", so, "--plots", po]);
@@ -180,29 +199,10 @@ fn bench_keeps_folders_it_did_not_make() {
 #[test]
 fn stale_results_are_never_reused_whatever_the_times() {
     let tmp = tempfile::tempdir().unwrap();
-    let make = |name: &str, seed: &str| {
-        let s = tmp.path().join(name);
-        let (code, _, err) = wb(&[
-            "--quiet",
-            "synth",
-            "session",
-            "--out",
-            s.to_str().unwrap(),
-            "--size",
-            "480x320",
-            "--fx",
-            "520",
-            "--radii",
-            "20,15,12",
-            "--layout",
-            "row",
-            "--seed",
-            seed,
-        ]);
-        assert_eq!(code, 0, "{err}");
-        s
-    };
-    let (a, b) = (make("a", "1"), make("b", "2"));
+    let (a, b) = (
+        row_session(tmp.path(), "a", "1"),
+        row_session(tmp.path(), "b", "2"),
+    );
     let ao = a.to_str().unwrap();
     let solve = || {
         let (code, out, err) = wb(&["--quiet", "solve", "--joint", ao, "--no-jackknife"]);
