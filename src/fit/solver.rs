@@ -148,6 +148,93 @@ impl FloorSums {
     }
 }
 
+/// The most parameters one channel's residual depends on: all but the other channels' σ0 and
+/// albedo.
+const MAX_ROW: usize = N_PARAMS - 4;
+
+/// The channel a parameter belongs to alone (σ0 and albedo), if any.
+fn channel_exclusive(k: usize) -> Option<usize> {
+    match k {
+        idx::SIGMA0..=2 => Some(k - idx::SIGMA0),
+        idx::ALBEDO..=5 => Some(k - idx::ALBEDO),
+        _ => None,
+    }
+}
+
+/// One chunk's normal equations per channel over that channel's own parameters (the lower
+/// triangle, row-major with stride [`MAX_ROW`]), scattered into the free parameters' matrix once
+/// per chunk: a channel's row has at most [`MAX_ROW`] non-zeros, so this is half the work of the
+/// dense product, on fixed-size arrays.
+struct ChunkSums {
+    a: [[f64; MAX_ROW * MAX_ROW]; 3],
+    b: [[f64; MAX_ROW]; 3],
+    rr: f64,
+    ww: [f64; 3],
+    wr: [f64; 3],
+    wg: [[f64; MAX_ROW]; 3],
+}
+
+impl ChunkSums {
+    fn new() -> ChunkSums {
+        ChunkSums {
+            a: [[0.0; MAX_ROW * MAX_ROW]; 3],
+            b: [[0.0; MAX_ROW]; 3],
+            rr: 0.0,
+            ww: [0.0; 3],
+            wr: [0.0; 3],
+            wg: [[0.0; MAX_ROW]; 3],
+        }
+    }
+
+    /// One residual r of channel `ch` with its Jacobian row g (that channel's parameters) and
+    /// weight w.
+    #[inline(always)]
+    fn add(&mut self, ch: usize, g: &[f64], r: f64, w: f64, floor: bool) {
+        let (a, b) = (&mut self.a[ch], &mut self.b[ch]);
+        for (i, &gi) in g.iter().enumerate() {
+            b[i] += gi * r;
+            let row = &mut a[i * MAX_ROW..i * MAX_ROW + i + 1];
+            for (s, &gj) in row.iter_mut().zip(&g[..=i]) {
+                *s += gi * gj;
+            }
+        }
+        self.rr += r * r;
+        if floor {
+            self.ww[ch] += w * w;
+            self.wr[ch] += w * r;
+            for (s, &gi) in self.wg[ch].iter_mut().zip(g) {
+                *s += w * gi;
+            }
+        }
+    }
+
+    /// Into the free parameters' JᵀJ (lower triangle), Jᵀr, rᵀr and floor sums.
+    fn scatter(
+        &self,
+        layout: &[Vec<(usize, usize)>; 3],
+        n: usize,
+        floor: bool,
+    ) -> (DMatrix<f64>, DVector<f64>, f64, FloorSums) {
+        let mut jtj = DMatrix::<f64>::zeros(n, n);
+        let mut jtr = DVector::<f64>::zeros(n);
+        let mut fs = FloorSums::zero(if floor { n } else { 0 });
+        for (c, cols) in layout.iter().enumerate() {
+            for (i, &(pi, _)) in cols.iter().enumerate() {
+                jtr[pi] += self.b[c][i];
+                for (j, &(pj, _)) in cols[..=i].iter().enumerate() {
+                    jtj[(pi, pj)] += self.a[c][i * MAX_ROW + j];
+                }
+                if floor {
+                    fs.wg[c][pi] += self.wg[c][i];
+                }
+            }
+            fs.ww[c] = self.ww[c];
+            fs.wr[c] = self.wr[c];
+        }
+        (jtj, jtr, self.rr, fs)
+    }
+}
+
 impl Problem<'_> {
     fn free_idx(&self) -> Vec<usize> {
         (0..N_PARAMS).filter(|&k| self.free[k]).collect()
@@ -336,12 +423,27 @@ impl Problem<'_> {
                 FloorSums::zero(if floor { n } else { 0 }),
             )
         };
+        // Per channel, the free parameters its residual can depend on (a channel's gradient row
+        // is zero at the other channels' σ0 and albedo): their positions in `free`, ascending.
+        let layout: [Vec<(usize, usize)>; 3] = std::array::from_fn(|c| {
+            free.iter()
+                .enumerate()
+                .filter(|&(_, &k)| !channel_exclusive(k).is_some_and(|o| o != c))
+                .map(|(i, &k)| (i, k))
+                .collect()
+        });
         let (mut jtj, mut jtr, mut rtr, sums) = self
             .obs
             .par_chunks(2048)
             .map(|chunk| {
-                let (mut a, mut b, mut c, mut fs) = zero();
-                let mut g = vec![0.0; n];
+                let mut acc = ChunkSums::new();
+                let scale: [[f64; MAX_ROW]; 3] = std::array::from_fn(|c| {
+                    std::array::from_fn(|i| layout[c].get(i).map_or(0.0, |&(_, k)| dpdu[k]))
+                });
+                let cols: [[usize; MAX_ROW]; 3] = std::array::from_fn(|c| {
+                    std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
+                });
+                let mut g = [0.0; MAX_ROW];
                 for o in chunk {
                     let (l, grad) =
                         self.model
@@ -351,27 +453,15 @@ impl Problem<'_> {
                         if w == 0.0 {
                             continue;
                         }
+                        let m = layout[ch].len();
                         let r = w * (l[ch] - o.radiance[ch]);
-                        for (i, &k) in free.iter().enumerate() {
-                            g[i] = w * grad[ch][k] * dpdu[k];
+                        for i in 0..m {
+                            g[i] = w * grad[ch][cols[ch][i]] * scale[ch][i];
                         }
-                        for i in 0..n {
-                            b[i] += g[i] * r;
-                            for j in 0..=i {
-                                a[(i, j)] += g[i] * g[j];
-                            }
-                        }
-                        c += r * r;
-                        if floor {
-                            fs.ww[ch] += w * w;
-                            fs.wr[ch] += w * r;
-                            for (s, gi) in fs.wg[ch].iter_mut().zip(&g) {
-                                *s += w * gi;
-                            }
-                        }
+                        acc.add(ch, &g[..m], r, w, floor);
                     }
                 }
-                (a, b, c, fs)
+                acc.scatter(&layout, n, floor)
             })
             .collect::<Vec<_>>()
             .into_iter()

@@ -46,10 +46,14 @@ impl CdrfEval {
     /// ∂f/∂(cos θ): the derivative the light-direction Jacobian needs. Finite everywhere for the
     /// wrapped form (the θ → 0 and θ → π limits come from ∂²f/∂θ²).
     pub fn d_cos(&self, theta: f64) -> f64 {
-        let s = theta.sin();
+        self.d_cos_at(theta.sin(), theta.cos())
+    }
+
+    /// [`Self::d_cos`] from sin θ and cos θ (computed once for the three channels).
+    pub fn d_cos_at(&self, s: f64, c: f64) -> f64 {
         if s.abs() > 1e-6 {
             -self.d_theta / s
-        } else if theta.cos() > 0.0 {
+        } else if c > 0.0 {
             -self.d2_theta
         } else {
             self.d2_theta

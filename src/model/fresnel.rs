@@ -36,19 +36,20 @@ pub fn eval(cos_i: f64, eta: f64) -> FresnelEval {
         };
     }
     let ct = ct2.sqrt();
-    let dct_dci = ci / (eta * eta * ct);
-    let dct_deta = si2 / (eta * eta * eta * ct);
-    // r = (a − b)/(a + b): dr = 2 (b da − a db) / (a + b)².
-    let ratio = |a: f64, b: f64, da: f64, db: f64| {
-        let s = a + b;
-        ((a - b) / s, 2.0 * (b * da - a * db) / (s * s))
-    };
-    // rs: a = ci, b = η ct.
-    let (rs, drs_dci) = ratio(ci, eta * ct, 1.0, eta * dct_dci);
-    let (_, drs_deta) = ratio(ci, eta * ct, 0.0, ct + eta * dct_deta);
-    // rp: a = η ci, b = ct.
-    let (rp, drp_dci) = ratio(eta * ci, ct, eta, dct_dci);
-    let (_, drp_deta) = ratio(eta * ci, ct, ci, dct_deta);
+    let e2ct = 1.0 / (eta * eta * ct);
+    let dct_dci = ci * e2ct;
+    let dct_deta = si2 * e2ct / eta;
+    // r = (a − b)/(a + b): dr = 2 (b da − a db) / (a + b)², one division per ratio.
+    // rs: a = ci, b = η ct; rp: a = η ci, b = ct.
+    let (a_s, b_s) = (ci, eta * ct);
+    let (a_p, b_p) = (eta * ci, ct);
+    let (inv_s, inv_p) = (1.0 / (a_s + b_s), 1.0 / (a_p + b_p));
+    let (rs, rp) = ((a_s - b_s) * inv_s, (a_p - b_p) * inv_p);
+    let (ks, kp) = (2.0 * inv_s * inv_s, 2.0 * inv_p * inv_p);
+    let drs_dci = ks * (b_s - a_s * eta * dct_dci);
+    let drs_deta = -ks * a_s * (ct + eta * dct_deta);
+    let drp_dci = kp * (b_p * eta - a_p * dct_dci);
+    let drp_deta = kp * (b_p * ci - a_p * dct_deta);
     FresnelEval {
         reflectance: 0.5 * (rs * rs + rp * rp),
         d_cos: rs * drs_dci + rp * drp_dci,

@@ -351,6 +351,8 @@ impl Model {
         let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
         let lv = l.dot(&g.view).clamp(-1.0, 1.0);
         let theta = nl.acos();
+        // sin θ for ∂f/∂(cos θ), once for the three channels.
+        let sin_theta = ((1.0 - nl) * (1.0 + nl)).sqrt();
         let fr = if self.exit_fresnel {
             fresnel::eval(nv, m.eta)
         } else {
@@ -396,7 +398,7 @@ impl Model {
             row[idx::KERNEL_WEIGHT] = a * t_exit * mix.d_weight;
             row[idx::KERNEL_RATIO] = a * t_exit * mix.d_ratio;
             // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
-            let d_nl = a * t_exit * f.d_cos(theta) + spec.d_nl;
+            let d_nl = a * t_exit * f.d_cos_at(sin_theta, nl) + spec.d_nl;
             let dl = g.normal * d_nl + g.view * spec.d_lv;
             row[idx::AZIMUTH] = dl.dot(&dl_da);
             row[idx::ELEVATION] = dl.dot(&dl_de);

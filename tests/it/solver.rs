@@ -340,6 +340,58 @@ fn a_prior_combines_with_the_data_as_two_gaussians_do() {
     );
 }
 
+/// The normal equations are accumulated per channel over that channel's own parameters and
+/// scattered once per chunk: with every parameter free (extensions and a two-Gaussian kernel
+/// active), unequal weights and some channels left out (weight 0), they equal JᵀJ, Jᵀr and rᵀr of
+/// the Jacobian `evaluate` forms row by row.
+#[test]
+fn normal_equations_equal_the_product_of_the_jacobian() {
+    let mut p = truth();
+    p.material.sigma_exponent = 0.2;
+    p.material.albedo_curvature = 0.1;
+    p.material.kernel_weight = 0.3;
+    p.material.kernel_ratio = 2.5;
+    p.material.eta = 1.45;
+    // More than one chunk of 2048 observations.
+    let mut obs = observations(&p, &[35.0, 20.0, 12.0], 1500, 0.01, 5);
+    for (i, o) in obs.iter_mut().enumerate() {
+        o.weight = [
+            if i % 11 == 0 {
+                0.0
+            } else {
+                1.0 + (i % 5) as f64
+            },
+            2.0 - 0.1 * (i % 7) as f64,
+            if i % 13 == 0 { 0.0 } else { 0.5 },
+        ];
+    }
+    let mut start = p;
+    start.material.sigma0_mm = [5.0, 3.5, 2.0];
+    start.material.eta = 1.3;
+    start.light.azimuth += 0.02;
+    let problem = Problem {
+        model: Model::default(),
+        obs: &obs,
+        free: [true; N_PARAMS],
+        u: to_unbounded(&start.to_vec()),
+        priors: vec![],
+        history: None,
+        floor: false,
+    };
+    let (r, j) = problem.evaluate(true);
+    let j = j.unwrap();
+    let ne = problem.normal_equations();
+    let (jtj, jtr) = (j.transpose() * &j, j.transpose() * &r);
+    let rel = (&ne.jtj - &jtj).amax() / jtj.amax();
+    let rel_r = (&ne.jtr - &jtr).amax() / jtr.amax();
+    // Measured: 5e-16 and 2e-15 (summation order).
+    println!("JᵀJ {rel:.1e}, Jᵀr {rel_r:.1e}");
+    assert!(rel < 1e-13 && rel_r < 1e-13, "{rel:e} {rel_r:e}");
+    assert!((ne.rtr_obs - r.norm_squared()).abs() < 1e-13 * r.norm_squared());
+    // Every parameter reaches the matrix (no column left out of the per-channel layout).
+    assert!((0..N_PARAMS).all(|k| ne.jtj[(k, k)] > 0.0));
+}
+
 /// The observations with a dark floor added to each channel.
 fn with_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
     obs.iter()
