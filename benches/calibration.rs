@@ -23,6 +23,7 @@ fn opts(dir: &Path, out: &Path, detector: DetectorChoice) -> Options {
         plots: None,
         detector,
         subpix_window: None,
+        exports: vec![],
         quiet: true,
     }
 }

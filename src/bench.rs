@@ -376,6 +376,7 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
             plots: Some(dir.join(format!("plots-{name}"))),
             detector: choice,
             subpix_window: None,
+            exports: vec![],
             quiet: true,
         };
         let t = Instant::now();

@@ -23,6 +23,8 @@ pub struct Options {
     pub detector: DetectorChoice,
     /// cornerSubPix half-window (px); default: a third of the corner spacing, within [3, 25].
     pub subpix_window: Option<u32>,
+    /// Formats written beside intrinsics.json besides the OpenCV YAML, which is always written.
+    pub exports: Vec<crate::formats::camera_export::ExportFormat>,
     pub quiet: bool,
 }
 
@@ -37,6 +39,8 @@ pub struct Report {
     pub exif_notes: Vec<String>,
     pub intrinsics_file: PathBuf,
     pub yaml_file: PathBuf,
+    /// The other formats written (ROS, COLMAP), with a note on each.
+    pub exports: Vec<(PathBuf, String)>,
     pub plot_files: Vec<PathBuf>,
     pub detection_s: f64,
     pub calibration_s: f64,
@@ -350,9 +354,38 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             "images_read": images_read,
         })),
     };
-    // One set: the YAML and the plots, then intrinsics.json (what the reuse check trusts) last.
-    let set = crate::formats::output::OutputSet::begin(&[&intrinsics_file, &yaml_file, &plot_dir]);
+    // The other tools' formats, in the same folder.
+    use crate::formats::camera_export::{self as export, ExportFormat};
+    let mut exports: Vec<(PathBuf, String, String)> = vec![];
+    for f in [ExportFormat::Ros, ExportFormat::Colmap] {
+        if !opts.exports.contains(&f) {
+            continue;
+        }
+        let path = out_dir.join(f.file_name());
+        let (text, note) = match f {
+            ExportFormat::Ros => (
+                export::ros_camera_info(c),
+                "ROS CameraInfo, plumb_bob, P = [K | 0]".to_string(),
+            ),
+            _ => {
+                let (text, model) = export::colmap_cameras(c);
+                (
+                    text,
+                    format!("COLMAP camera 1, {model}, principal point + 0.5 px (COLMAP's pixel origin)"),
+                )
+            }
+        };
+        exports.push((path, text, note));
+    }
+    // One set: the YAML, the exports and the plots, then intrinsics.json (what the reuse check
+    // trusts) last.
+    let mut members: Vec<&Path> = vec![&intrinsics_file, &yaml_file, &plot_dir];
+    members.extend(exports.iter().map(|(p, _, _)| p.as_path()));
+    let set = crate::formats::output::OutputSet::begin(&members);
     crate::formats::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
+    for (path, text, _) in &exports {
+        crate::formats::output::write_bytes(path, text.as_bytes())?;
+    }
     let plot_files = super::plots::write_all(&cal, &object, size, &plot_dir)?;
     crate::formats::output::write_json(&intrinsics_file, &file)?;
     set.commit()?;
@@ -364,6 +397,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         exif_notes,
         intrinsics_file,
         yaml_file,
+        exports: exports.into_iter().map(|(p, _, n)| (p, n)).collect(),
         plot_files,
         detection_s,
         calibration_s,

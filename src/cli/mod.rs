@@ -485,6 +485,17 @@ pub(crate) struct CalibrateArgs {
     /// cornerSubPix half-window in px (default: a third of the corner spacing, 3 to 25).
     #[arg(long)]
     pub(crate) subpix_window: Option<u32>,
+    /// Also write the camera for other tools, beside intrinsics.json: ros (camera_info.yaml),
+    /// colmap (cameras.txt); opencv (intrinsics.yml) is always written. Comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub(crate) export: Vec<ExportArg>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum ExportArg {
+    Opencv,
+    Ros,
+    Colmap,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -30,6 +30,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<Calibrated> {
         })?;
     workbench::calibrate::cv::set_threads(1);
     use workbench::calibrate::DetectorChoice;
+    use workbench::formats::camera_export::ExportFormat;
     let detector = match a.detector {
         DetectorArg::Auto => DetectorChoice::Auto,
         DetectorArg::Classic => DetectorChoice::Classic,
@@ -44,6 +45,15 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> Result<Calibrated> {
         plots: a.plots,
         detector,
         subpix_window: a.subpix_window,
+        exports: a
+            .export
+            .iter()
+            .map(|e| match e {
+                ExportArg::Opencv => ExportFormat::OpenCv,
+                ExportArg::Ros => ExportFormat::Ros,
+                ExportArg::Colmap => ExportFormat::Colmap,
+            })
+            .collect(),
         quiet,
     };
     let r = run::run(
@@ -125,6 +135,9 @@ impl fmt::Display for Calibrated {
             r.intrinsics_file.display(),
             r.yaml_file.display()
         )?;
+        for (path, note) in &r.exports {
+            writeln!(f, "wrote    {} ({note})", path.display())?;
+        }
         if let Some(dir) = r.plot_files.first().and_then(|p| p.parent()) {
             writeln!(
                 f,

@@ -1,8 +1,9 @@
 //! Files the stages exchange with the outside world and with each other: the session a user
-//! writes ([`session`]), the camera's calibration ([`intrinsics`]), photos ([`photo`]) and their EXIF
+//! writes ([`session`]), the camera's calibration ([`intrinsics`], and for other tools [`camera_export`]), photos ([`photo`]) and their EXIF
 //! ([`exif`]), what the detector found ([`detections`]), a fit ([`fit`]), atomic output
 //! ([`output`]) and what an output was made from ([`fingerprint`]).
 
+pub mod camera_export;
 pub mod detections;
 pub mod exif;
 pub mod fingerprint;

@@ -228,6 +228,7 @@ mod with_opencv {
             plots: None,
             detector: DetectorChoice::Auto,
             subpix_window: None,
+            exports: vec![],
             quiet: true,
         }
     }

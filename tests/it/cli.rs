@@ -199,7 +199,15 @@ fn calibrate_a_synthetic_folder_and_refuse_an_empty_one() {
         "12",
     ]);
     assert_eq!(code, 0, "{err}");
-    let (code, stdout, err) = wb(&["--quiet", "calibrate", c, "--square", "25mm"]);
+    let (code, stdout, err) = wb(&[
+        "--quiet",
+        "calibrate",
+        c,
+        "--square",
+        "25mm",
+        "--export",
+        "ros,colmap",
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(
         stdout.contains("pattern  9x6 inner corners") && stdout.contains("12 used"),
@@ -219,6 +227,20 @@ fn calibrate_a_synthetic_folder_and_refuse_an_empty_one() {
     )
     .unwrap();
     assert!((j["fx"].as_f64().unwrap() / 700.0 - 1.0).abs() < 2e-3);
+    // The exports describe the camera intrinsics.json holds (tests/it/export.rs reads them back).
+    let cam =
+        workbench::formats::intrinsics::IntrinsicsFile::load(&Path::new(c).join("intrinsics.json"))
+            .unwrap()
+            .camera();
+    let read = |f: &str| std::fs::read_to_string(Path::new(c).join(f)).unwrap();
+    assert!(crate::export::check_ros(&read("camera_info.yaml"), &cam) < 1e-12);
+    let (_, e) = crate::export::check_colmap(&read("cameras.txt"), &cam);
+    assert!(e < 1e-12, "{e}");
+    assert!(
+        stdout.contains("camera_info.yaml (ROS CameraInfo")
+            && stdout.contains("cameras.txt (COLMAP"),
+        "{stdout}"
+    );
 
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();

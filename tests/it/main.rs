@@ -9,6 +9,7 @@ mod cli;
 mod curvature;
 mod detect;
 mod exif;
+mod export;
 mod geometry;
 mod hostile;
 mod layout;
