@@ -428,7 +428,7 @@ impl Problem<'_> {
         let layout: [Vec<(usize, usize)>; 3] = std::array::from_fn(|c| {
             free.iter()
                 .enumerate()
-                .filter(|&(_, &k)| !channel_exclusive(k).is_some_and(|o| o != c))
+                .filter(|&(_, &k)| channel_exclusive(k).is_none_or(|o| o == c))
                 .map(|(i, &k)| (i, k))
                 .collect()
         });
