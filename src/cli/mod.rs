@@ -167,6 +167,29 @@ pub(crate) struct LutArgs {
     /// Curvature of the table's last row (1/mm; default 3 / the smallest radius fitted).
     #[arg(long)]
     pub(crate) kappa_max: Option<f64>,
+    /// An engine's layout: texel-centred axes, its curvature unit and texture origin, one texture
+    /// and a sidecar (<out>.exr|png and <out>.json; default stem lut-<preset> beside fit.json).
+    #[arg(long, value_enum)]
+    pub(crate) preset: Option<PresetArg>,
+    /// The preset's texture: exr (half float, linear), png16 (linear), png8-srgb (8-bit sRGB).
+    #[arg(long, value_enum, default_value = "exr", requires = "preset")]
+    pub(crate) format: TextureArg,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum PresetArg {
+    Unity,
+    Unreal,
+    Godot,
+    Blender,
+    Generic,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum TextureArg {
+    Exr,
+    Png16,
+    Png8Srgb,
 }
 
 #[derive(Args)]

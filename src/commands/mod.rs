@@ -39,7 +39,7 @@ pub(crate) fn run(command: Command, quiet: bool) -> Result<Box<dyn Report>> {
         Command::Solve(a) => boxed(solve::solve(a, quiet)),
         Command::Plot(a) => boxed(plot::plot(a, quiet)),
         Command::Bench(a) => boxed(bench::bench(a, quiet)),
-        Command::Lut(a) => boxed(lut::lut(a)),
+        Command::Lut(a) => lut::lut(a),
         Command::Render(a) => boxed(render::render(a)),
         Command::Check { session } => boxed(check::check(session)),
         #[cfg(feature = "opencv")]

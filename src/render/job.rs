@@ -75,6 +75,72 @@ pub fn table(fm: &FitMaterial, size: TableSize, kappa_max: Option<f64>) -> Resul
     })
 }
 
+/// An engine-ready table written: its size search, the table and its sidecar.
+pub struct EngineLut {
+    pub tried: Vec<lut::Tried>,
+    pub table: crate::render::preset::EngineTable,
+    pub sidecar: crate::render::preset::EngineLutJson,
+    pub paths: [PathBuf; 2],
+}
+
+/// `workbench lut --preset`: the table in an engine's layout ([`crate::render::preset`]), over
+/// curvature 0 to `kappa_max` (1/mm; default 3 / the smallest radius fitted).
+pub fn write_engine_lut(
+    fit_path: &Path,
+    stem: &Path,
+    preset: crate::render::preset::Preset,
+    encoding: crate::render::preset::Encoding,
+    size: TableSize,
+    kappa_max: Option<f64>,
+) -> Result<EngineLut> {
+    use crate::render::preset::{self, EngineTable, WriteRequest};
+    let (fit, fm) = lut::read_fit(fit_path)?;
+    let kmax = kappa_max.unwrap_or_else(|| fm.kappa_max());
+    if !(kmax > 0.0) || !kmax.is_finite() {
+        return Err(Error::Argument(format!(
+            "--kappa-max must be > 0, got {kmax}"
+        )));
+    }
+    let range = [0.0, kmax];
+    let (table, tried, tolerance) = match size {
+        TableSize::Fixed(w, h) => {
+            if !(2..=8193).contains(&w) || !(2..=8193).contains(&h) {
+                return Err(Error::Argument(format!(
+                    "table size {w}x{h}: each side must be 2..8193 texels"
+                )));
+            }
+            let t = EngineTable::build(&fm, w, h, range);
+            let e = t.error(&fm).0.max_rel;
+            (t, vec![((w, h), e)], None)
+        }
+        TableSize::Auto(tol) => {
+            if !(tol > 0.0) {
+                return Err(Error::Argument(format!(
+                    "--tolerance must be > 0, got {tol}"
+                )));
+            }
+            let (t, _, tried) = preset::choose(&fm, range, tol);
+            (t, tried, Some(tol))
+        }
+    };
+    let req = WriteRequest {
+        stem,
+        preset,
+        encoding,
+        fit: &fit,
+        fit_path,
+        fm: &fm,
+        tolerance,
+    };
+    let (paths, sidecar) = preset::write(&req, &table)?;
+    Ok(EngineLut {
+        tried,
+        table,
+        sidecar,
+        paths,
+    })
+}
+
 /// `workbench lut`: build and write the table. Returns it with the paths written.
 pub fn write_lut(
     fit_path: &Path,

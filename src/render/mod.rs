@@ -6,4 +6,5 @@ pub mod check;
 pub mod job;
 pub mod lut;
 pub mod mesh;
+pub mod preset;
 pub mod raster;

@@ -1,0 +1,202 @@
+//! `workbench lut --preset`: each engine's texture read back from its file and sampled the way a
+//! GPU samples it (written out here: texel-centred, bilinear, clamp-to-edge, the engine's texture
+//! origin and curvature unit taken from the preset's documentation, not from the sidecar), against
+//! the fit's model evaluated directly.
+
+use crate::common::wb;
+use rand::{Rng, SeedableRng};
+use std::path::{Path, PathBuf};
+use workbench::formats::fit::FitFile;
+
+/// A small solved session (two spheres in one photo); returns the folder and its fit.json.
+fn solved() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s");
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "session",
+        "--out",
+        s.to_str().unwrap(),
+        "--size",
+        "640x480",
+        "--fx",
+        "700",
+        "--radii",
+        "25,12",
+        "--layout",
+        "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = wb(&["--quiet", "solve", "--no-jackknife", s.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    (dir, s.join("fit.json"))
+}
+
+/// A decoded texture: picture rows top to bottom, linear values (after `value_scale`).
+struct Texture {
+    w: usize,
+    h: usize,
+    rgb: Vec<[f64; 3]>,
+}
+
+fn load(path: &Path, scale: f64, srgb: bool) -> Texture {
+    let img = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb32f();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let dec = |x: f32| {
+        let x = x as f64;
+        let lin = if srgb {
+            workbench::formats::photo::srgb_decode(x)
+        } else {
+            x
+        };
+        lin * scale
+    };
+    Texture {
+        w,
+        h,
+        rgb: img
+            .pixels()
+            .map(|p| [dec(p[0]), dec(p[1]), dec(p[2])])
+            .collect(),
+    }
+}
+
+/// A GPU's bilinear clamp-to-edge sample at (u, v); `bottom_left`: v = 0 is the picture's bottom.
+fn gpu(t: &Texture, u: f64, v: f64, bottom_left: bool) -> [f64; 3] {
+    let v = if bottom_left { 1.0 - v } else { v };
+    let axis = |x: f64, n: usize| {
+        let x = (x * n as f64 - 0.5).clamp(0.0, (n - 1) as f64);
+        let i = (x.floor() as usize).min(n - 2);
+        (i, x - i as f64)
+    };
+    let (i, fu) = axis(u, t.w);
+    let (j, fv) = axis(v, t.h);
+    let at = |i: usize, j: usize| t.rgb[j * t.w + i];
+    let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * fu;
+        let bottom = c[k] + (d[k] - c[k]) * fu;
+        top + (bottom - top) * fv
+    })
+}
+
+/// The largest error over the peak at random (N·L, κ) between the outer texel centres, κ given
+/// to the shader in the engine's unit (`per_mm` of it in 1/mm).
+fn worst(t: &Texture, fit: &FitFile, side: &serde_json::Value, per_mm: f64, bl: bool) -> f64 {
+    let (model, material) = (fit.model(), fit.params().material);
+    let range = side["curvature_range"].as_array().unwrap();
+    let (k0, k1) = (range[0].as_f64().unwrap(), range[1].as_f64().unwrap());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let (mut worst, mut peak) = (0.0f64, 0.0f64);
+    for _ in 0..20_000 {
+        let u = rng.random_range(0.5 / t.w as f64..1.0 - 0.5 / t.w as f64);
+        let v = rng.random_range(0.5 / t.h as f64..1.0 - 0.5 / t.h as f64);
+        let (cos, kappa_engine) = (2.0 * u - 1.0, k0 + (k1 - k0) * v);
+        let want = model.diffuse(&material, cos, kappa_engine / per_mm);
+        let got = gpu(t, u, v, bl);
+        for c in 0..3 {
+            worst = worst.max((got[c] - want[c]).abs());
+            peak = peak.max(want[c]);
+        }
+    }
+    worst / peak
+}
+
+#[test]
+fn each_preset_samples_like_the_model_in_its_units_and_origin() {
+    let (dir, fit_path) = solved();
+    let fit: FitFile = serde_json::from_str(&std::fs::read_to_string(&fit_path).unwrap()).unwrap();
+    let fit_s = fit_path.to_str().unwrap();
+    // (preset, curvature unit per 1/mm, origin bottom-left), from each engine's documentation.
+    for (preset, per_mm, bl) in [
+        ("unity", 1000.0, true),
+        ("unreal", 10.0, false),
+        ("godot", 1000.0, false),
+        ("blender", 1000.0, true),
+        ("generic", 1000.0, false),
+    ] {
+        let stem = dir.path().join(format!("t-{preset}"));
+        let (code, out, err) = wb(&[
+            "lut",
+            fit_s,
+            "--preset",
+            preset,
+            "--out",
+            stem.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let side: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(stem.with_extension("json")).unwrap())
+                .unwrap();
+        assert_eq!(side["schema"], "workbench.engine-lut/1");
+        assert_eq!(side["preset"], preset);
+        assert_eq!(side["encoding"], "exr-half");
+        assert!(side["std"]["sigma0_mm"].is_array() && side["std_source"].is_string());
+        let t = load(&stem.with_extension("exr"), 1.0, false);
+        assert_eq!(
+            (t.w, t.h),
+            (
+                side["width"].as_u64().unwrap() as usize,
+                side["height"].as_u64().unwrap() as usize
+            )
+        );
+        // The measured range in the engine's unit, and where it lies in v.
+        let m = side["measured_curvature"].as_array().unwrap();
+        let radii: Vec<f64> = fit.rmse.spheres.iter().map(|s| s.radius_mm).collect();
+        let rmax = radii.iter().cloned().fold(0.0, f64::max);
+        assert!(
+            (m[0].as_f64().unwrap() - per_mm / rmax).abs() < 1e-9 * per_mm,
+            "{out}"
+        );
+        let e = worst(&t, &fit, &side, per_mm, bl);
+        let stated = side["stored_error"]["max_rel"].as_f64().unwrap();
+        println!(
+            "{preset}: {}x{}, random-point error {e:.2e}, stated {stated:.2e}",
+            t.w, t.h
+        );
+        assert!(
+            e <= 1.05 * stated,
+            "{preset}: {e:e} against the stated {stated:e}"
+        );
+        // The wrong origin reads another curvature's row: far off.
+        let flipped = worst(&t, &fit, &side, per_mm, !bl);
+        assert!(flipped > 10.0 * stated, "{preset}: flipped {flipped:e}");
+    }
+    // 16-bit linear and 8-bit sRGB PNG, decoded with the sidecar's scale.
+    for (format, srgb) in [("png16", false), ("png8-srgb", true)] {
+        let stem = dir.path().join(format!("t-{format}"));
+        let (code, _, err) = wb(&[
+            "--quiet",
+            "lut",
+            fit_s,
+            "--preset",
+            "godot",
+            "--format",
+            format,
+            "--out",
+            stem.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let side: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(stem.with_extension("json")).unwrap())
+                .unwrap();
+        let t = load(
+            &stem.with_extension("png"),
+            side["value_scale"].as_f64().unwrap(),
+            srgb,
+        );
+        let e = worst(&t, &fit, &side, 1000.0, false);
+        let stated = side["stored_error"]["max_rel"].as_f64().unwrap();
+        println!("{format}: random-point error {e:.2e}, stated {stated:.2e}");
+        assert!(
+            e <= 1.05 * stated,
+            "{format}: {e:e} against the stated {stated:e}"
+        );
+    }
+    // --format without --preset is refused by the parser.
+    let (code, _, err) = wb(&["lut", fit_s, "--format", "png16"]);
+    assert!(code != 0 && err.contains("--preset"), "{err}");
+}
