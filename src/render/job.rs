@@ -80,7 +80,7 @@ pub struct EngineLut {
     pub tried: Vec<lut::Tried>,
     pub table: crate::render::preset::EngineTable,
     pub sidecar: crate::render::preset::EngineLutJson,
-    pub paths: [PathBuf; 2],
+    pub paths: Vec<PathBuf>,
 }
 
 /// `workbench lut --preset`: the table in an engine's layout ([`crate::render::preset`]), over

@@ -28,6 +28,13 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const SCHEMA: &str = "workbench.engine-lut/1";
 
+/// The shading snippets (`src/render/shaders/`): the table, the exit Fresnel transmission and the
+/// specular lobe as `workbench render` shades, in GLSL (WebGL2, OpenGL, Godot), HLSL (Unity,
+/// Unreal) and WGSL (WebGPU). tests/it/shaders.rs compiles each with a reference front end.
+pub const GLSL: &str = include_str!("shaders/cdrf.glsl");
+pub const HLSL: &str = include_str!("shaders/cdrf.hlsl");
+pub const WGSL: &str = include_str!("shaders/cdrf.wgsl");
+
 /// Probes per texel interval and axis in [`EngineTable::error`].
 const PROBES: usize = 4;
 
@@ -67,6 +74,18 @@ impl Preset {
         match self {
             Preset::Unreal => ("1/cm", 10.0),
             _ => ("1/m", 1000.0),
+        }
+    }
+
+    /// The shading snippets written with the table: (extension, text).
+    pub fn shaders(self) -> Vec<(&'static str, &'static str)> {
+        match self {
+            Preset::Unity => vec![("hlsl", HLSL)],
+            Preset::Unreal => vec![("ush", HLSL)],
+            Preset::Godot => vec![("gdshaderinc", GLSL)],
+            // Blender's nodes take the table; the shading is built from nodes (README).
+            Preset::Blender => vec![],
+            Preset::Generic => vec![("glsl", GLSL), ("wgsl", WGSL)],
         }
     }
 
@@ -408,6 +427,8 @@ pub struct EngineLutJson {
     /// The tolerance the size was chosen for (null: the size was given).
     pub tolerance: Option<f64>,
     pub import_settings: Vec<String>,
+    /// The shading snippets beside this file.
+    pub shaders: Vec<String>,
 }
 
 /// Everything `write` needs besides the table.
@@ -421,8 +442,9 @@ pub struct WriteRequest<'a> {
     pub tolerance: Option<f64>,
 }
 
-/// The texture and the sidecar (in that order, as one set). Returns their paths and the sidecar.
-pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<([PathBuf; 2], EngineLutJson)> {
+/// The texture, the shading snippets and the sidecar (in that order, as one set). Returns the
+/// paths written and the sidecar.
+pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, EngineLutJson)> {
     let with = |ext: &str| {
         let mut s = req.stem.as_os_str().to_owned();
         s.push(".");
@@ -431,7 +453,15 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<([PathBuf; 2], Engin
     };
     let image = with(req.encoding.extension());
     let json = with("json");
-    let set = OutputSet::begin(&[&image, &json]);
+    let shaders: Vec<(PathBuf, &str)> = req
+        .preset
+        .shaders()
+        .into_iter()
+        .map(|(ext, text)| (with(ext), text))
+        .collect();
+    let mut members: Vec<&Path> = vec![&image, &json];
+    members.extend(shaders.iter().map(|(p, _)| p.as_path()));
+    let set = OutputSet::begin(&members);
     let (w, h) = (t.width, t.height);
     let scale = t.peak().max(f64::MIN_POSITIVE);
     // Picture rows top to bottom: texel row j is picture row j (top-left origin) or h − 1 − j.
@@ -547,8 +577,15 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<([PathBuf; 2], Engin
         border_error: border_err,
         tolerance: req.tolerance,
         import_settings: req.preset.import_settings(req.encoding),
+        shaders: shaders.iter().map(|(p, _)| name(p)).collect(),
     };
+    for (path, text) in &shaders {
+        write_bytes(path, text.as_bytes())?;
+    }
     write_json(&json, &sidecar)?;
     set.commit()?;
-    Ok(([image, json], sidecar))
+    let mut paths = vec![image];
+    paths.extend(shaders.into_iter().map(|(p, _)| p));
+    paths.push(json);
+    Ok((paths, sidecar))
 }

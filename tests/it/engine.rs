@@ -135,6 +135,24 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
         assert_eq!(side["preset"], preset);
         assert_eq!(side["encoding"], "exr-half");
         assert!(side["std"]["sigma0_mm"].is_array() && side["std_source"].is_string());
+        // The shading snippets beside it, each the snippet tests/it/shaders.rs compiles.
+        let want: &[(&str, &str)] = match preset {
+            "unity" => &[("hlsl", workbench::render::preset::HLSL)],
+            "unreal" => &[("ush", workbench::render::preset::HLSL)],
+            "godot" => &[("gdshaderinc", workbench::render::preset::GLSL)],
+            "blender" => &[],
+            _ => &[
+                ("glsl", workbench::render::preset::GLSL),
+                ("wgsl", workbench::render::preset::WGSL),
+            ],
+        };
+        assert_eq!(side["shaders"].as_array().unwrap().len(), want.len());
+        for (ext, text) in want {
+            assert_eq!(
+                &std::fs::read_to_string(stem.with_extension(ext)).unwrap(),
+                text
+            );
+        }
         let t = load(&stem.with_extension("exr"), 1.0, false);
         assert_eq!(
             (t.w, t.h),

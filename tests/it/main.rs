@@ -19,6 +19,7 @@ mod pbr;
 mod photo;
 mod reliability;
 mod render;
+mod shaders;
 mod solve;
 mod solver;
 mod stress;
