@@ -46,6 +46,8 @@ pub(crate) enum Command {
     Lut(LutArgs),
     /// Render a mesh (OBJ or PLY) with a fit's CDRF, or check the renderer against the fit.
     Render(RenderArgs),
+    /// A static page that shows a fit's material in the browser (WebGL2): a sphere row and a mesh.
+    View(ViewArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -190,6 +192,36 @@ pub(crate) enum TextureArg {
     Exr,
     Png16,
     Png8Srgb,
+}
+
+#[derive(Args)]
+pub(crate) struct ViewArgs {
+    /// The fit (fit.json written by `workbench solve`).
+    pub(crate) fit: PathBuf,
+    /// A mesh (.obj or .ply) to show beside the sphere row.
+    #[arg(long)]
+    pub(crate) mesh: Option<PathBuf>,
+    /// Folder for the page (default: view/ beside fit.json; its files are replaced).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Units of the mesh file's coordinates.
+    #[arg(long, value_enum, default_value = "mm")]
+    pub(crate) unit: workbench::render::mesh::Unit,
+    /// Rescale the mesh so its bounding sphere is this many mm across.
+    #[arg(long)]
+    pub(crate) object_size: Option<f64>,
+    /// The light's start as AZIMUTH,ELEVATION degrees in the camera frame (default: the fit's).
+    #[arg(long, value_parser = angles, allow_hyphen_values = true)]
+    pub(crate) light: Option<[f64; 2]>,
+    /// The camera's start around the mesh as AZIMUTH,ELEVATION degrees (as for render).
+    #[arg(long, value_parser = angles, default_value = "0,0", allow_hyphen_values = true)]
+    pub(crate) view: [f64; 2],
+    /// The camera's start distance (as for render).
+    #[arg(long, default_value_t = 1.05)]
+    pub(crate) distance: f64,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 30.0)]
+    pub(crate) fov: f64,
 }
 
 #[derive(Args)]

@@ -11,6 +11,7 @@ mod plot;
 mod render;
 mod solve;
 mod synth;
+mod view;
 
 use crate::cli::{Command, Synth};
 use anyhow::Result;
@@ -41,6 +42,7 @@ pub(crate) fn run(command: Command, quiet: bool) -> Result<Box<dyn Report>> {
         Command::Bench(a) => boxed(bench::bench(a, quiet)),
         Command::Lut(a) => lut::lut(a),
         Command::Render(a) => boxed(render::render(a)),
+        Command::View(a) => boxed(view::view(a)),
         Command::Check { session } => boxed(check::check(session)),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => boxed(calibrate::calibrate(a, quiet)),

@@ -8,3 +8,4 @@ pub mod lut;
 pub mod mesh;
 pub mod preset;
 pub mod raster;
+pub mod view;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use workbench::formats::fit::FitFile;
 
 /// A small solved session (two spheres in one photo); returns the folder and its fit.json.
-fn solved() -> (tempfile::TempDir, PathBuf) {
+pub(crate) fn solved() -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("s");
     let (code, _, err) = wb(&[

@@ -25,3 +25,4 @@ mod solver;
 mod stress;
 mod synth;
 mod uncertainty;
+mod view;
