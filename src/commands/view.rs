@@ -12,7 +12,7 @@ pub(crate) fn view(a: ViewArgs) -> Result<Viewed> {
     if !(a.fov > 1.0 && a.fov < 170.0) {
         bail!("--fov must be in (1, 170) degrees, got {}", a.fov);
     }
-    if !(a.distance >= 1.0) || !a.distance.is_finite() {
+    if !a.distance.is_finite() || a.distance < 1.0 {
         bail!("--distance must be ≥ 1, got {}", a.distance);
     }
     let mesh = match &a.mesh {
