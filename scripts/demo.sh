@@ -23,6 +23,8 @@ fi
 bunny=../shared/data/meshes/stanford-bunny.obj
 if [ -f "$bunny" ]; then
   "$wb" render "$bunny" --unit m --fit datasets/demo/fit.json --out datasets/demo/bunny.png
+  "$wb" view datasets/demo/fit.json --mesh "$bunny" --unit m
 else
   echo "$bunny absent: bunny render skipped"
+  "$wb" view datasets/demo/fit.json
 fi
