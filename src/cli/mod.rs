@@ -176,6 +176,16 @@ pub(crate) struct LutArgs {
     /// The preset's texture: exr (half float, linear), png16 (linear), png8-srgb (8-bit sRGB).
     #[arg(long, value_enum, default_value = "exr", requires = "preset")]
     pub(crate) format: TextureArg,
+    /// With --preset: a mesh (.obj or .ply) written beside the table as binary glTF (metres) with
+    /// workbench's per-vertex curvature in the preset's unit (attribute _CDRF_KAPPA, v in COLOR_0).
+    #[arg(long, requires = "preset")]
+    pub(crate) mesh: Option<PathBuf>,
+    /// Units of the mesh file's coordinates.
+    #[arg(long, value_enum, default_value = "mm", requires = "mesh")]
+    pub(crate) unit: workbench::render::mesh::Unit,
+    /// Rescale the mesh so its bounding sphere is this many mm across.
+    #[arg(long, requires = "mesh")]
+    pub(crate) object_size: Option<f64>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

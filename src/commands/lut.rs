@@ -90,6 +90,13 @@ fn engine(a: LutArgs, p: PresetArg) -> Result<Engine> {
         },
         None => beside(&a.fit, &format!("lut-{}", preset.name())),
     };
+    let mesh = match &a.mesh {
+        Some(m) => Some(
+            workbench::render::job::prepare(m, a.unit, a.object_size)
+                .with_context(|| format!("lut --mesh {}", m.display()))?,
+        ),
+        None => None,
+    };
     let e = workbench::render::job::write_engine_lut(
         &a.fit,
         &stem,
@@ -97,6 +104,7 @@ fn engine(a: LutArgs, p: PresetArg) -> Result<Engine> {
         encoding,
         table_size(a.size, a.tolerance),
         a.kappa_max,
+        mesh.as_ref(),
     )
     .with_context(|| format!("lut {}", a.fit.display()))?;
     Ok(Engine(e))

@@ -1,6 +1,6 @@
 //! Files the stages exchange with the outside world and with each other: the session a user
 //! writes ([`session`]), the camera's calibration ([`intrinsics`], and for other tools [`camera_export`]), photos ([`photo`]) and their EXIF
-//! ([`exif`]), what the detector found ([`detections`]), a fit ([`fit`]), atomic output
+//! ([`exif`]), what the detector found ([`detections`]), a fit ([`fit`]), a mesh with its curvature for engines ([`glb`]), atomic output
 //! ([`output`]) and what an output was made from ([`fingerprint`]).
 
 pub mod camera_export;
@@ -8,6 +8,7 @@ pub mod detections;
 pub mod exif;
 pub mod fingerprint;
 pub mod fit;
+pub mod glb;
 pub mod intrinsics;
 pub mod output;
 pub mod photo;

@@ -84,7 +84,8 @@ pub struct EngineLut {
 }
 
 /// `workbench lut --preset`: the table in an engine's layout ([`crate::render::preset`]), over
-/// curvature 0 to `kappa_max` (1/mm; default 3 / the smallest radius fitted).
+/// curvature 0 to `kappa_max` (1/mm; default 3 / the smallest radius fitted), with `mesh` and its
+/// curvature as binary glTF beside it when given.
 pub fn write_engine_lut(
     fit_path: &Path,
     stem: &Path,
@@ -92,6 +93,7 @@ pub fn write_engine_lut(
     encoding: crate::render::preset::Encoding,
     size: TableSize,
     kappa_max: Option<f64>,
+    mesh: Option<&Prepared>,
 ) -> Result<EngineLut> {
     use crate::render::preset::{self, EngineTable, WriteRequest};
     let (fit, fm) = lut::read_fit(fit_path)?;
@@ -131,6 +133,7 @@ pub fn write_engine_lut(
         fit_path,
         fm: &fm,
         tolerance,
+        mesh: mesh.map(|m| (&m.mesh, m.curvature.as_slice())),
     };
     let (paths, sidecar) = preset::write(&req, &table)?;
     Ok(EngineLut {

@@ -429,6 +429,8 @@ pub struct EngineLutJson {
     pub import_settings: Vec<String>,
     /// The shading snippets beside this file.
     pub shaders: Vec<String>,
+    /// The mesh with its curvature (`--mesh`), binary glTF, or null.
+    pub mesh: Option<String>,
 }
 
 /// Everything `write` needs besides the table.
@@ -440,6 +442,8 @@ pub struct WriteRequest<'a> {
     pub fit_path: &'a Path,
     pub fm: &'a FitMaterial,
     pub tolerance: Option<f64>,
+    /// A mesh (mm) and its curvature (1/mm), written beside the table as `<stem>.glb`.
+    pub mesh: Option<(&'a crate::render::mesh::Mesh, &'a [f64])>,
 }
 
 /// The texture, the shading snippets and the sidecar (in that order, as one set). Returns the
@@ -459,8 +463,13 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         .into_iter()
         .map(|(ext, text)| (with(ext), text))
         .collect();
+    let glb = with("glb");
+    let (unit, per_mm) = req.preset.curvature_unit();
     let mut members: Vec<&Path> = vec![&image, &json];
     members.extend(shaders.iter().map(|(p, _)| p.as_path()));
+    if req.mesh.is_some() {
+        members.push(&glb);
+    }
     let set = OutputSet::begin(&members);
     let (w, h) = (t.width, t.height);
     let scale = t.peak().max(f64::MIN_POSITIVE);
@@ -512,7 +521,6 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
             "sRGB transfer curve, 8-bit (import as colour: the GPU decodes it to linear)"
         }
     };
-    let (unit, per_mm) = req.preset.curvature_unit();
     let [k0, k1] = t.kappa_range_per_mm;
     let meas = req.fm.measured_kappa;
     let measured_v = [t.v_of(meas[0]), t.v_of(meas[1])];
@@ -566,7 +574,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         value_scale,
         content: "diffuse term a_c(kappa) · f(acos(N·L); sigma_c(kappa)) per channel (R, G, B), linear radiance with the photographed light's irradiance folded in, without the exit Fresnel transmission or the specular lobe".into(),
         shading: "L_c = table_c(u, v) · value_scale · T(n·v; eta) + ks · D(n·h; alpha) · G1(n·l) · G1(n·v) · F(l·h; eta) / (4 n·v), for n·l > 0 and n·v > 0 (the lobe 0 otherwise); T = 1 − F, F the exact unpolarised dielectric Fresnel reflectance, D the GGX distribution alpha² / (pi ((n·h)² (alpha² − 1) + 1)²), G1(c) = 2c / (c + sqrt(alpha² + (1 − alpha²) c²)); n, l, v unit vectors, l and v pointing away from the surface".into(),
-        curvature: "per vertex, as workbench render computes it (src/render/mesh.rs): the mean absolute principal curvature (|k1| + |k2|) / 2 from a least-squares fit of the normal curvatures along the vertex's edges, in curvature_unit, passed as a vertex attribute; fallback (an approximation, noisy on coarse meshes): kappa ≈ length(fwidth(N)) / length(fwidth(P)) in screen space".into(),
+        curvature: "per vertex, as workbench render computes it (src/render/mesh.rs): the mean absolute principal curvature (|k1| + |k2|) / 2 from a least-squares fit of the normal curvatures along the vertex's edges, in curvature_unit, passed as a vertex attribute (lut --preset --mesh writes the mesh as binary glTF with it: attribute _CDRF_KAPPA in curvature_unit, and v in COLOR_0); fallback (an approximation, noisy on coarse meshes): kappa ≈ length(fwidth(N)) / length(fwidth(P)) in screen space".into(),
         material: req.fm.material,
         reference_radius_mm: req.fm.model.reference_radius_mm,
         std: serde_json::to_value(&req.fit.std)
@@ -578,14 +586,41 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         tolerance: req.tolerance,
         import_settings: req.preset.import_settings(req.encoding),
         shaders: shaders.iter().map(|(p, _)| name(p)).collect(),
+        mesh: req.mesh.map(|_| name(&glb)),
     };
     for (path, text) in &shaders {
         write_bytes(path, text.as_bytes())?;
+    }
+    if let Some((mesh, curvature)) = req.mesh {
+        let f = |v: &nalgebra::Vector3<f64>, s: f64| {
+            [(v.x * s) as f32, (v.y * s) as f32, (v.z * s) as f32]
+        };
+        let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| f(p, 1e-3)).collect();
+        let normals: Vec<[f32; 3]> = mesh.normals.iter().map(|n| f(n, 1.0)).collect();
+        let kappa: Vec<f32> = curvature.iter().map(|&k| (k * per_mm) as f32).collect();
+        let v: Vec<f32> = curvature
+            .iter()
+            .map(|&k| t.v_of(k).clamp(0.0, 1.0) as f32)
+            .collect();
+        let bytes = crate::formats::glb::encode(
+            &crate::formats::glb::GlbMesh {
+                positions: &positions,
+                normals: &normals,
+                kappa: &kappa,
+                v: &v,
+                triangles: &mesh.triangles,
+            },
+            concat!("workbench ", env!("CARGO_PKG_VERSION")),
+        );
+        write_bytes(&glb, &bytes)?;
     }
     write_json(&json, &sidecar)?;
     set.commit()?;
     let mut paths = vec![image];
     paths.extend(shaders.into_iter().map(|(p, _)| p));
+    if req.mesh.is_some() {
+        paths.push(glb);
+    }
     paths.push(json);
     Ok((paths, sidecar))
 }

@@ -218,3 +218,72 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
     let (code, _, err) = wb(&["lut", fit_s, "--format", "png16"]);
     assert!(code != 0 && err.contains("--preset"), "{err}");
 }
+
+/// `--mesh`: the mesh as binary glTF, read back by the `gltf` crate: positions in metres, the
+/// normals, and per vertex workbench's curvature in the preset's unit (`_CDRF_KAPPA`) and its
+/// texture coordinate v in COLOR_0.
+#[test]
+fn a_mesh_goes_out_as_gltf_with_its_curvature() {
+    let (dir, fit) = solved();
+    let obj = crate::view::torus_obj(dir.path());
+    let stem = dir.path().join("unreal");
+    let (code, out, err) = wb(&[
+        "lut",
+        fit.to_str().unwrap(),
+        "--preset",
+        "unreal",
+        "--mesh",
+        obj.to_str().unwrap(),
+        "--out",
+        stem.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("unreal.glb"), "{out}");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(stem.with_extension("json")).unwrap())
+            .unwrap();
+    assert_eq!(side["mesh"], "unreal.glb");
+    let range = side["curvature_range"].as_array().unwrap();
+    let (k0, k1) = (range[0].as_f64().unwrap(), range[1].as_f64().unwrap());
+    // What workbench computes for the same file (1/mm), and the file read back.
+    let mesh =
+        workbench::render::mesh::Mesh::load(&obj, workbench::render::mesh::Unit::Mm).unwrap();
+    let kappa = mesh.curvature();
+    let (doc, buffers, _) = gltf::import(stem.with_extension("glb")).unwrap();
+    let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+    let reader = prim.reader(|b| Some(&buffers[b.index()]));
+    let pos: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+    let nor: Vec<[f32; 3]> = reader.read_normals().unwrap().collect();
+    let col: Vec<[f32; 4]> = reader.read_colors(0).unwrap().into_rgba_f32().collect();
+    let idx: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+    assert_eq!(pos.len(), mesh.positions.len());
+    assert_eq!(idx.len(), 3 * mesh.triangles.len());
+    let custom = prim
+        .attributes()
+        .find(|(s, _)| matches!(s, gltf::Semantic::Extras(n) if n.trim_start_matches('_') == "CDRF_KAPPA"))
+        .map(|(_, a)| a)
+        .expect("_CDRF_KAPPA");
+    let ks: Vec<f32> = gltf::accessor::Iter::<f32>::new(custom, |b| Some(&buffers[b.index()][..]))
+        .unwrap()
+        .collect();
+    for (i, p) in mesh.positions.iter().enumerate() {
+        for c in 0..3 {
+            assert!(
+                (pos[i][c] as f64 - p[c] * 1e-3).abs() < 1e-7,
+                "position {i}"
+            );
+            assert!(
+                (nor[i][c] as f64 - mesh.normals[i][c]).abs() < 1e-6,
+                "normal {i}"
+            );
+        }
+        // Unreal's unit: 1/cm = 10 × 1/mm.
+        let want = kappa[i] * 10.0;
+        assert!(
+            (ks[i] as f64 - want).abs() <= 1e-6 * want.abs().max(1.0),
+            "kappa {i}"
+        );
+        let v = ((want - k0) / (k1 - k0)).clamp(0.0, 1.0);
+        assert!((col[i][0] as f64 - v).abs() < 1e-6, "v {i}");
+    }
+}

@@ -59,7 +59,7 @@ fn browse(tool: &str, page: &Path, hash: &str, size: (u32, u32), png: Option<&Pa
 }
 
 /// A torus (major radius 30 mm, tube 12 mm) as an OBJ file: curvature from 1/12 to 1/42 … −1/18 /mm.
-fn torus_obj(dir: &Path) -> PathBuf {
+pub(crate) fn torus_obj(dir: &Path) -> PathBuf {
     let m = workbench::render::mesh::shapes::torus(30.0, 12.0, 96, 48);
     let mut s = String::new();
     for p in &m.positions {
