@@ -34,7 +34,7 @@ pub fn encode(m: &GlbMesh, generator: &str) -> Vec<u8> {
     let mut push = |bytes: Vec<u8>, target: u32| {
         let offset = bin.len();
         bin.extend_from_slice(&bytes);
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push(json!({
@@ -92,7 +92,7 @@ pub fn encode(m: &GlbMesh, generator: &str) -> Vec<u8> {
         ],
     });
     let mut text = doc.to_string().into_bytes();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let total = 12 + 8 + text.len() + 8 + bin.len();
