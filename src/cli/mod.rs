@@ -214,24 +214,42 @@ pub(crate) struct ViewArgs {
     /// Folder for the page (default: view/ beside fit.json; its files are replaced).
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) scene: SceneArgs,
+}
+
+/// How a mesh is scaled and seen (`render`, and where `view` starts).
+#[derive(Args)]
+pub(crate) struct SceneArgs {
     /// Units of the mesh file's coordinates.
     #[arg(long, value_enum, default_value = "mm")]
     pub(crate) unit: workbench::render::mesh::Unit,
     /// Rescale the mesh so its bounding sphere is this many mm across.
     #[arg(long)]
     pub(crate) object_size: Option<f64>,
-    /// The light's start as AZIMUTH,ELEVATION degrees in the camera frame (default: the fit's).
+    /// Light as AZIMUTH,ELEVATION degrees in the camera frame (0,0: at the camera; azimuth to the
+    /// right, elevation up). Default: the fit's light.
     #[arg(long, value_parser = angles, allow_hyphen_values = true)]
     pub(crate) light: Option<[f64; 2]>,
-    /// The camera's start around the mesh as AZIMUTH,ELEVATION degrees (as for render).
+    /// Camera position around the mesh as AZIMUTH,ELEVATION degrees (mesh y up; 0,0 looks along −z).
     #[arg(long, value_parser = angles, default_value = "0,0", allow_hyphen_values = true)]
     pub(crate) view: [f64; 2],
-    /// The camera's start distance (as for render).
+    /// Camera distance relative to the tightest framing of the mesh's bounding sphere.
     #[arg(long, default_value_t = 1.05)]
     pub(crate) distance: f64,
     /// Horizontal field of view, degrees.
     #[arg(long, default_value_t = 30.0)]
     pub(crate) fov: f64,
+}
+
+impl SceneArgs {
+    pub(crate) fn view(&self) -> workbench::render::raster::View {
+        workbench::render::raster::View {
+            azimuth_deg: self.view[0],
+            elevation_deg: self.view[1],
+            distance: self.distance,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -249,28 +267,11 @@ pub(crate) struct RenderArgs {
     /// solver's predicted image.
     #[arg(long, conflicts_with = "mesh")]
     pub(crate) check: bool,
-    /// Units of the mesh file's coordinates.
-    #[arg(long, value_enum, default_value = "mm")]
-    pub(crate) unit: workbench::render::mesh::Unit,
-    /// Rescale the mesh so its bounding sphere is this many mm across.
-    #[arg(long)]
-    pub(crate) object_size: Option<f64>,
-    /// Light as AZIMUTH,ELEVATION degrees in the camera frame (0,0: at the camera; azimuth to the
-    /// right, elevation up). Default: the fit's light.
-    #[arg(long, value_parser = angles, allow_hyphen_values = true)]
-    pub(crate) light: Option<[f64; 2]>,
-    /// Camera position around the mesh as AZIMUTH,ELEVATION degrees (mesh y up; 0,0 looks along −z).
-    #[arg(long, value_parser = angles, default_value = "0,0", allow_hyphen_values = true)]
-    pub(crate) view: [f64; 2],
-    /// Camera distance relative to the tightest framing of the mesh's bounding sphere.
-    #[arg(long, default_value_t = 1.05)]
-    pub(crate) distance: f64,
+    #[command(flatten)]
+    pub(crate) scene: SceneArgs,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_resolution)]
     pub(crate) resolution: (u32, u32),
-    /// Horizontal field of view, degrees.
-    #[arg(long, default_value_t = 30.0)]
-    pub(crate) fov: f64,
     /// Coverage samples per pixel (anti-aliasing).
     #[arg(long, value_enum, default_value = "4")]
     pub(crate) samples: workbench::render::raster::Samples,

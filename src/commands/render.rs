@@ -23,16 +23,12 @@ pub(crate) fn render(a: RenderArgs) -> Result<Rendered> {
         bail!("a mesh and --out are needed without --check");
     };
     let mut o = workbench::render::job::RenderOptions::new(&mesh, &a.fit, &out);
-    o.unit = a.unit;
-    o.object_size_mm = a.object_size;
-    o.light_deg = a.light.map(|[az, el]| (az, el));
-    o.view = workbench::render::raster::View {
-        azimuth_deg: a.view[0],
-        elevation_deg: a.view[1],
-        distance: a.distance,
-    };
+    o.unit = a.scene.unit;
+    o.object_size_mm = a.scene.object_size;
+    o.light_deg = a.scene.light.map(|[az, el]| (az, el));
+    o.view = a.scene.view();
     (o.width, o.height) = a.resolution;
-    o.fov_deg = a.fov;
+    o.fov_deg = a.scene.fov;
     o.samples = a.samples;
     o.shading = a.shading;
     o.bits = a.bits;

@@ -9,15 +9,16 @@ use workbench::render::view::{ViewMesh, ViewOptions, ViewReport};
 
 pub(crate) fn view(a: ViewArgs) -> Result<Viewed> {
     let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "view"));
-    if !(a.fov > 1.0 && a.fov < 170.0) {
-        bail!("--fov must be in (1, 170) degrees, got {}", a.fov);
+    let sc = &a.scene;
+    if !(sc.fov > 1.0 && sc.fov < 170.0) {
+        bail!("--fov must be in (1, 170) degrees, got {}", sc.fov);
     }
-    if !a.distance.is_finite() || a.distance < 1.0 {
-        bail!("--distance must be ≥ 1, got {}", a.distance);
+    if !sc.distance.is_finite() || sc.distance < 1.0 {
+        bail!("--distance must be ≥ 1, got {}", sc.distance);
     }
     let mesh = match &a.mesh {
         Some(m) => {
-            let p = workbench::render::job::prepare(m, a.unit, a.object_size)
+            let p = workbench::render::job::prepare(m, sc.unit, sc.object_size)
                 .with_context(|| format!("view --mesh {}", m.display()))?;
             Some(ViewMesh {
                 mesh: p.mesh,
@@ -30,13 +31,9 @@ pub(crate) fn view(a: ViewArgs) -> Result<Viewed> {
         fit: &a.fit,
         out: &out,
         mesh,
-        light_deg: a.light.map(|[az, el]| (az, el)),
-        view: workbench::render::raster::View {
-            azimuth_deg: a.view[0],
-            elevation_deg: a.view[1],
-            distance: a.distance,
-        },
-        fov_deg: a.fov,
+        light_deg: sc.light.map(|[az, el]| (az, el)),
+        view: sc.view(),
+        fov_deg: sc.fov,
     })
     .with_context(|| format!("view {}", a.fit.display()))?;
     Ok(Viewed { r, out })

@@ -8,28 +8,9 @@ use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
 use workbench::formats::fit::FitFile;
 
-/// A small solved session (two spheres in one photo); returns the folder and its fit.json.
+/// A small solved session (two spheres in one photo, no jackknife); the folder and its fit.json.
 pub(crate) fn solved() -> (tempfile::TempDir, PathBuf) {
-    let dir = tempfile::tempdir().unwrap();
-    let s = dir.path().join("s");
-    let (code, _, err) = wb(&[
-        "--quiet",
-        "synth",
-        "session",
-        "--out",
-        s.to_str().unwrap(),
-        "--size",
-        "640x480",
-        "--fx",
-        "700",
-        "--radii",
-        "25,12",
-        "--layout",
-        "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let (code, _, err) = wb(&["--quiet", "solve", "--no-jackknife", s.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
+    let (dir, s) = crate::common::solved_row(&["--no-jackknife"]);
     (dir, s.join("fit.json"))
 }
 

@@ -240,26 +240,7 @@ fn lut_files_round_trip() {
 /// both shadings and bit depths, and bad input as one line.
 #[test]
 fn command_line_lut_render_and_check() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = dir.path().join("s");
-    let (code, _, err) = wb(&[
-        "--quiet",
-        "synth",
-        "session",
-        "--out",
-        s.to_str().unwrap(),
-        "--size",
-        "640x480",
-        "--fx",
-        "700",
-        "--radii",
-        "25,12",
-        "--layout",
-        "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let (code, _, err) = wb(&["--quiet", "solve", s.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
+    let (dir, s) = common::solved_row(&[]);
     let fit = s.join("fit.json");
     let fit = fit.to_str().unwrap();
     let (code, out, err) = wb(&["lut", fit]);

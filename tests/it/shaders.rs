@@ -7,22 +7,8 @@
 use std::process::Command;
 use workbench::render::preset::{GLSL, HLSL, WGSL};
 
-/// glslangValidator, or None with the reason printed (a failure under CI=true: the project's
-/// setup script installs it, package glslang-tools).
 fn glslang() -> Option<&'static str> {
-    let ok = Command::new("glslangValidator")
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some("glslangValidator");
-    }
-    assert!(
-        std::env::var("CI").as_deref() != Ok("true"),
-        "glslangValidator missing under CI=true: run scripts/setup-system.sh"
-    );
-    println!("skipped: glslangValidator not installed (scripts/setup-system.sh installs it)");
-    None
+    crate::common::system_tool("glslangValidator", "glslang-tools")
 }
 
 /// Compile `source` (written to a file named `name`) with glslangValidator and `args`; panics

@@ -7,21 +7,8 @@ use crate::common::wb;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Chromium, or None with the reason printed (a failure under CI=true).
 fn chromium() -> Option<&'static str> {
-    if Command::new("chromium")
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success())
-    {
-        return Some("chromium");
-    }
-    assert!(
-        std::env::var("CI").as_deref() != Ok("true"),
-        "chromium missing under CI=true: run scripts/setup-system.sh"
-    );
-    println!("skipped: chromium not installed (scripts/setup-system.sh installs it)");
-    None
+    crate::common::system_tool("chromium", "chromium")
 }
 
 /// Headless Chromium on `page` (with `hash`): a screenshot of `size` into `png`, or the DOM after

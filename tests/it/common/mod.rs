@@ -70,6 +70,50 @@ pub fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
     (a - b).abs() <= rel * b.abs() + abs
 }
 
+/// A small synthetic session solved (two spheres, 25 and 12 mm, in one 640×480 photo); `solve`
+/// gets `extra` arguments. Returns the temporary folder and the session folder inside it.
+pub fn solved_row(extra: &[&str]) -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s");
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "synth",
+        "session",
+        "--out",
+        s.to_str().unwrap(),
+        "--size",
+        "640x480",
+        "--fx",
+        "700",
+        "--radii",
+        "25,12",
+        "--layout",
+        "row",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = wb(&[&["--quiet", "solve"][..], extra, &[s.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    (dir, s)
+}
+
+/// A system program the setup script installs (`package`), or None with the reason printed; its
+/// absence fails the test under `CI=true`.
+pub fn system_tool(program: &'static str, package: &str) -> Option<&'static str> {
+    let ok = std::process::Command::new(program)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(program);
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "{program} missing under CI=true: scripts/setup-system.sh installs {package}"
+    );
+    println!("skipped: {program} not installed (scripts/setup-system.sh installs {package})");
+    None
+}
+
 /// ../shared/data, or None with a printed reason; under `CI=true` its absence fails the test.
 pub fn shared_data() -> Option<std::path::PathBuf> {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
