@@ -14,6 +14,14 @@ pub(crate) fn solved() -> (tempfile::TempDir, PathBuf) {
     (dir, s.join("fit.json"))
 }
 
+/// `workbench lut <fit> --out <stem> <args>`: what it printed and the sidecar it wrote.
+fn lut(fit: &str, stem: &Path, args: &[&str]) -> (String, serde_json::Value) {
+    let (code, out, err) = wb(&[&["lut", fit, "--out", stem.to_str().unwrap()][..], args].concat());
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(stem.with_extension("json")).unwrap();
+    (out, serde_json::from_str(&text).unwrap())
+}
+
 /// A decoded texture: picture rows top to bottom, linear values (after `value_scale`).
 struct Texture {
     w: usize,
@@ -100,18 +108,7 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
         ("generic", 1000.0, false),
     ] {
         let stem = dir.path().join(format!("t-{preset}"));
-        let (code, out, err) = wb(&[
-            "lut",
-            fit_s,
-            "--preset",
-            preset,
-            "--out",
-            stem.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
-        let side: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(stem.with_extension("json")).unwrap())
-                .unwrap();
+        let (out, side) = lut(fit_s, &stem, &["--preset", preset]);
         assert_eq!(side["schema"], "workbench.engine-lut/1");
         assert_eq!(side["preset"], preset);
         assert_eq!(side["encoding"], "exr-half");
@@ -167,21 +164,7 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
     // 16-bit linear and 8-bit sRGB PNG, decoded with the sidecar's scale.
     for (format, srgb) in [("png16", false), ("png8-srgb", true)] {
         let stem = dir.path().join(format!("t-{format}"));
-        let (code, _, err) = wb(&[
-            "--quiet",
-            "lut",
-            fit_s,
-            "--preset",
-            "godot",
-            "--format",
-            format,
-            "--out",
-            stem.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
-        let side: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(stem.with_extension("json")).unwrap())
-                .unwrap();
+        let (_, side) = lut(fit_s, &stem, &["--preset", "godot", "--format", format]);
         let t = load(
             &stem.with_extension("png"),
             side["value_scale"].as_f64().unwrap(),
