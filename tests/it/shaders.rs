@@ -87,12 +87,13 @@ float4 main(float3 n : NORMAL, float3 p : TEXCOORD1, float k : TEXCOORD0) : SV_T
                                 float2(0.0, 200.0), 1.0, 1.4, 0.5, 0.2), 1.0);
 }
 "#;
-    compile(
-        tool,
-        "cdrf.hlsl",
-        &format!("{HLSL}{main}"),
-        &["-D", "-V", "-S", "frag", "-e", "main", "-o", "cdrf.spv"],
-    );
+    let args = ["-D", "-V", "-S", "frag", "-e", "main", "-o", "cdrf.spv"];
+    compile(tool, "cdrf.hlsl", &format!("{HLSL}{main}"), &args);
+    // A call with an argument missing is refused.
+    let broken = HLSL.replacen("cdrf_fresnel(lh, eta)", "cdrf_fresnel(lh)", 1);
+    let r =
+        std::panic::catch_unwind(|| compile(tool, "cdrf.hlsl", &format!("{broken}{main}"), &args));
+    assert!(r.is_err(), "a broken snippet compiled");
 }
 
 #[test]
