@@ -83,11 +83,7 @@ fn engine(a: LutArgs, p: PresetArg) -> Result<Engine> {
         TextureArg::Png8Srgb => Encoding::Png8Srgb,
     };
     let stem = match &a.out {
-        // A known extension given with the stem is dropped.
-        Some(o) => match o.extension().and_then(|e| e.to_str()) {
-            Some("exr" | "png" | "json") => o.with_extension(""),
-            _ => o.clone(),
-        },
+        Some(o) => workbench::render::lut::stem_of(o),
         None => beside(&a.fit, &format!("lut-{}", preset.name())),
     };
     let mesh = match &a.mesh {

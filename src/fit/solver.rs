@@ -432,17 +432,18 @@ impl Problem<'_> {
                 .map(|(i, &k)| (i, k))
                 .collect()
         });
+        // Per channel and row entry: the model parameter and its dp/du.
+        let scale: [[f64; MAX_ROW]; 3] = std::array::from_fn(|c| {
+            std::array::from_fn(|i| layout[c].get(i).map_or(0.0, |&(_, k)| dpdu[k]))
+        });
+        let cols: [[usize; MAX_ROW]; 3] = std::array::from_fn(|c| {
+            std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
+        });
         let (mut jtj, mut jtr, mut rtr, sums) = self
             .obs
             .par_chunks(2048)
             .map(|chunk| {
                 let mut acc = ChunkSums::new();
-                let scale: [[f64; MAX_ROW]; 3] = std::array::from_fn(|c| {
-                    std::array::from_fn(|i| layout[c].get(i).map_or(0.0, |&(_, k)| dpdu[k]))
-                });
-                let cols: [[usize; MAX_ROW]; 3] = std::array::from_fn(|c| {
-                    std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
-                });
                 let mut g = [0.0; MAX_ROW];
                 for o in chunk {
                     let (l, grad) =

@@ -36,25 +36,34 @@ pub struct Table {
     pub seconds: f64,
 }
 
-/// Build the table of a fit.
-pub fn table(fm: &FitMaterial, size: TableSize, kappa_max: Option<f64>) -> Result<Table> {
-    let t0 = Instant::now();
-    let kmax = kappa_max.unwrap_or_else(|| fm.kappa_max());
+/// κ_max (1/mm): the one given, checked, or 3 / the smallest radius fitted.
+fn kappa_max_of(fm: &FitMaterial, given: Option<f64>) -> Result<f64> {
+    let kmax = given.unwrap_or_else(|| fm.kappa_max());
     if !(kmax > 0.0) || !kmax.is_finite() {
         return Err(Error::Argument(format!(
             "--kappa-max must be > 0, got {kmax}"
         )));
     }
-    let (lut, error, tried, tolerance) = match size {
-        TableSize::Fixed(nc, nk) => {
-            if !(2..=8193).contains(&nc) || !(2..=8193).contains(&nk) {
+    Ok(kmax)
+}
+
+/// A table of the size asked for: `build` makes a table of n × m nodes or texels and measures its
+/// error; a fixed size is checked, `auto` takes the smallest standard size within its tolerance.
+/// Returns the table, its error, the sizes tried and the tolerance.
+#[allow(clippy::type_complexity)]
+fn sized<T>(
+    size: TableSize,
+    build: impl Fn(usize, usize) -> (T, InterpolationError),
+) -> Result<(T, InterpolationError, Vec<lut::Tried>, Option<f64>)> {
+    match size {
+        TableSize::Fixed(n, m) => {
+            if !(2..=8193).contains(&n) || !(2..=8193).contains(&m) {
                 return Err(Error::Argument(format!(
-                    "table size {nc}x{nk}: each side must be 2..8193 nodes"
+                    "table size {n}x{m}: each side must be 2..8193"
                 )));
             }
-            let l = Lut::build(&fm.model, &fm.material, nc, nk, kmax);
-            let e = lut::interpolation_error(&l, &fm.model, &fm.material);
-            (l, e, vec![((nc, nk), e.max_rel)], None)
+            let (t, e) = build(n, m);
+            Ok((t, e, vec![((n, m), e.max_rel)], None))
         }
         TableSize::Auto(tol) => {
             if !(tol > 0.0) {
@@ -62,16 +71,48 @@ pub fn table(fm: &FitMaterial, size: TableSize, kappa_max: Option<f64>) -> Resul
                     "--tolerance must be > 0, got {tol}"
                 )));
             }
-            let (l, e, tried) = lut::choose(&fm.model, &fm.material, kmax, tol);
-            (l, e, tried, Some(tol))
+            let (t, e, tried) = lut::choose(tol, build);
+            Ok((t, e, tried, Some(tol)))
         }
-    };
+    }
+}
+
+/// Build the table of a fit.
+pub fn table(fm: &FitMaterial, size: TableSize, kappa_max: Option<f64>) -> Result<Table> {
+    let t0 = Instant::now();
+    let kmax = kappa_max_of(fm, kappa_max)?;
+    let (lut, error, tried, tolerance) = sized(size, |nc, nk| {
+        let l = Lut::build(&fm.model, &fm.material, nc, nk, kmax);
+        let e = lut::interpolation_error(&l, &fm.model, &fm.material);
+        (l, e)
+    })?;
     Ok(Table {
         lut,
         error,
         tried,
         tolerance,
         seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// An engine preset's table of a fit over curvature 0 to κ_max (1/mm; default 3 / the smallest
+/// radius fitted), with its error before storage, the sizes tried and the tolerance.
+#[allow(clippy::type_complexity)]
+pub fn engine_table(
+    fm: &FitMaterial,
+    size: TableSize,
+    kappa_max: Option<f64>,
+) -> Result<(
+    crate::render::preset::EngineTable,
+    InterpolationError,
+    Vec<lut::Tried>,
+    Option<f64>,
+)> {
+    let range = [0.0, kappa_max_of(fm, kappa_max)?];
+    sized(size, |w, h| {
+        let t = crate::render::preset::EngineTable::build(fm, w, h, range);
+        let (e, _) = t.error(fm);
+        (t, e)
     })
 }
 
@@ -95,36 +136,9 @@ pub fn write_engine_lut(
     kappa_max: Option<f64>,
     mesh: Option<&Prepared>,
 ) -> Result<EngineLut> {
-    use crate::render::preset::{self, EngineTable, WriteRequest};
+    use crate::render::preset::{self, WriteRequest};
     let (fit, fm) = lut::read_fit(fit_path)?;
-    let kmax = kappa_max.unwrap_or_else(|| fm.kappa_max());
-    if !(kmax > 0.0) || !kmax.is_finite() {
-        return Err(Error::Argument(format!(
-            "--kappa-max must be > 0, got {kmax}"
-        )));
-    }
-    let range = [0.0, kmax];
-    let (table, tried, tolerance) = match size {
-        TableSize::Fixed(w, h) => {
-            if !(2..=8193).contains(&w) || !(2..=8193).contains(&h) {
-                return Err(Error::Argument(format!(
-                    "table size {w}x{h}: each side must be 2..8193 texels"
-                )));
-            }
-            let t = EngineTable::build(&fm, w, h, range);
-            let e = t.error(&fm).0.max_rel;
-            (t, vec![((w, h), e)], None)
-        }
-        TableSize::Auto(tol) => {
-            if !(tol > 0.0) {
-                return Err(Error::Argument(format!(
-                    "--tolerance must be > 0, got {tol}"
-                )));
-            }
-            let (t, _, tried) = preset::choose(&fm, range, tol);
-            (t, tried, Some(tol))
-        }
-    };
+    let (table, error, tried, tolerance) = engine_table(&fm, size, kappa_max)?;
     let req = WriteRequest {
         stem,
         preset,
@@ -132,6 +146,7 @@ pub fn write_engine_lut(
         fit: &fit,
         fit_path,
         fm: &fm,
+        error,
         tolerance,
         mesh: mesh.map(|m| (&m.mesh, m.curvature.as_slice())),
     };
@@ -261,11 +276,11 @@ pub fn prepare(path: &Path, unit: Unit, object_size_mm: Option<f64>) -> Result<P
     })
 }
 
-/// The default exposure: a flat surface facing the light, seen head-on, at 0.8 of full scale.
-pub(crate) fn default_exposure(lut: &Lut, eta: f64) -> f64 {
-    let d = lut.sample(1.0, 0.0);
-    let peak = d.iter().fold(0.0f32, |a, &b| a.max(b)) as f64
-        * crate::model::fresnel::transmission(1.0, eta);
+/// The default exposure: a flat surface facing the light, seen head-on, at 0.8 of full scale;
+/// `flat` is the table's diffuse term there (N·L = 1, κ = 0).
+pub(crate) fn default_exposure(flat: [f64; 3], eta: f64) -> f64 {
+    let peak =
+        flat.iter().fold(0.0f64, |a, &b| a.max(b)) * crate::model::fresnel::transmission(1.0, eta);
     if peak > 0.0 {
         0.8 / peak
     } else {
@@ -346,7 +361,8 @@ pub fn run(o: &RenderOptions) -> Result<RenderReport> {
     let t2 = Instant::now();
     let img = raster::render(&scene, &cam, &sh, o.samples);
     let frame_s = t2.elapsed().as_secs_f64();
-    let exposure = default_exposure(&table.lut, fm.material.eta) * o.exposure;
+    let exposure =
+        default_exposure(table.lut.sample(1.0, 0.0).map(f64::from), fm.material.eta) * o.exposure;
     let t3 = Instant::now();
     write_image(&o.out, &img, exposure, o.tone, o.bits)?;
     let write_s = t3.elapsed().as_secs_f64();
@@ -391,7 +407,7 @@ pub fn check(fit_path: &Path, dir: &Path, table_size: TableSize) -> Result<Vec<S
     let (fit, fm) = lut::read_fit(fit_path)?;
     let t = table(&fm, table_size, None)?;
     let results = check::check_fit(&fit, fit_path, &fm, &t.lut)?;
-    let exposure = default_exposure(&t.lut, fm.material.eta);
+    let exposure = default_exposure(t.lut.sample(1.0, 0.0).map(f64::from), fm.material.eta);
     // One set: the pictures, then sphere-check.json last.
     let set = crate::formats::output::OutputSet::begin(&[dir]);
     let mut out = Vec::new();

@@ -209,22 +209,20 @@ pub(crate) fn interpolation_error(
 /// A size tried by [`choose`] and its largest error over the peak.
 pub type Tried = ((usize, usize), f64);
 
-/// The smallest table of [`SIZES`] whose largest error is within `tolerance` of its peak (the
-/// largest size when none is), with its measured error and every size tried with its relative
-/// error.
-pub(crate) fn choose(
-    model: &Model,
-    material: &Material,
-    kappa_max: f64,
+/// The smallest of [`SIZES`] whose table (`build` makes it and measures its error) is within
+/// `tolerance` of its peak (the largest size when none is), with its measured error and every size
+/// tried with its relative error. The node table and the engine presets' texel table both choose
+/// their size with it.
+pub(crate) fn choose<T>(
     tolerance: f64,
-) -> (Lut, InterpolationError, Vec<Tried>) {
+    build: impl Fn(usize, usize) -> (T, InterpolationError),
+) -> (T, InterpolationError, Vec<Tried>) {
     let mut tried = Vec::new();
     for &(nc, nk) in &SIZES {
-        let lut = Lut::build(model, material, nc, nk, kappa_max);
-        let err = interpolation_error(&lut, model, material);
+        let (table, err) = build(nc, nk);
         tried.push(((nc, nk), err.max_rel));
         if err.max_rel <= tolerance || (nc, nk) == SIZES[SIZES.len() - 1] {
-            return (lut, err, tried);
+            return (table, err, tried);
         }
     }
     unreachable!("the last size always returns")
@@ -314,19 +312,33 @@ pub struct LutJson {
     pub tolerance: Option<f64>,
 }
 
-/// The three output paths of `--out <stem>` (an extension .png/.exr/.json is dropped).
-pub(crate) fn output_paths(out: &Path) -> [PathBuf; 3] {
-    let stem = match out.extension().and_then(|e| e.to_str()) {
+/// The stem of `--out` (an extension .png/.exr/.json given with it is dropped).
+pub fn stem_of(out: &Path) -> PathBuf {
+    match out.extension().and_then(|e| e.to_str()) {
         Some("png" | "exr" | "json") => out.with_extension(""),
         _ => out.to_path_buf(),
-    };
-    let with = |ext: &str| {
-        let mut s = stem.clone().into_os_string();
-        s.push(".");
-        s.push(ext);
-        PathBuf::from(s)
-    };
-    [with("png"), with("exr"), with("json")]
+    }
+}
+
+/// `<stem>.<ext>` (the stem's own dots kept).
+pub(crate) fn with_extension(stem: &Path, ext: &str) -> PathBuf {
+    let mut s = stem.as_os_str().to_owned();
+    s.push(".");
+    s.push(ext);
+    PathBuf::from(s)
+}
+
+/// A path's file name, as a sidecar names the files beside it.
+pub(crate) fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The three output paths of `--out <stem>` (an extension .png/.exr/.json is dropped).
+pub(crate) fn output_paths(out: &Path) -> [PathBuf; 3] {
+    let stem = stem_of(out);
+    ["png", "exr", "json"].map(|e| with_extension(&stem, e))
 }
 
 /// Write the table as a 16-bit PNG, an OpenEXR float image and the JSON sidecar. Returns the paths.
@@ -359,16 +371,11 @@ pub fn write(
             err: e,
         })?;
     write_bytes(exr, bytes.get_ref())?;
-    let name = |p: &Path| {
-        p.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
     let sidecar = LutJson {
         schema: SCHEMA.into(),
         fit: fit_path.display().to_string(),
-        png: name(png),
-        exr: name(exr),
+        png: file_name(png),
+        exr: file_name(exr),
         n_cos: lut.n_cos,
         n_kappa: lut.n_kappa,
         cos_range: [-1.0, 1.0],
@@ -495,7 +502,11 @@ mod tests {
     fn choose_meets_the_tolerance() {
         let model = Model::default();
         let m = material();
-        let (lut, err, _) = choose(&model, &m, 0.2, 2e-3);
+        let (lut, err, _) = choose(2e-3, |nc, nk| {
+            let l = Lut::build(&model, &m, nc, nk, 0.2);
+            let e = interpolation_error(&l, &model, &m);
+            (l, e)
+        });
         assert!(err.max_rel <= 2e-3);
         // The size before it would not have met it.
         let k = SIZES

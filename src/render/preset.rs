@@ -21,7 +21,7 @@ use crate::formats::fit::FitFile;
 use crate::formats::output::{write_bytes, write_json, OutputSet};
 use crate::formats::photo::{srgb_decode, srgb_encode, write_png16_rgb};
 use crate::model::Material;
-use crate::render::lut::{FitMaterial, InterpolationError, Tried, SIZES};
+use crate::render::lut::{file_name, with_extension, FitMaterial, InterpolationError};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -356,25 +356,6 @@ impl EngineTable {
     }
 }
 
-/// The smallest of the standard sizes whose sampled error between the outer texel centres is
-/// within `tolerance` of the peak (the largest when none is), with its error and every size tried.
-pub fn choose(
-    fm: &FitMaterial,
-    kappa_range: [f64; 2],
-    tolerance: f64,
-) -> (EngineTable, InterpolationError, Vec<Tried>) {
-    let mut tried = vec![];
-    for &(w, h) in &SIZES {
-        let t = EngineTable::build(fm, w, h, kappa_range);
-        let (e, _) = t.error(fm);
-        tried.push(((w, h), e.max_rel));
-        if e.max_rel <= tolerance || (w, h) == SIZES[SIZES.len() - 1] {
-            return (t, e, tried);
-        }
-    }
-    unreachable!("the last size always returns")
-}
-
 /// The sidecar (`<stem>.json`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -441,6 +422,9 @@ pub struct WriteRequest<'a> {
     pub fit: &'a FitFile,
     pub fit_path: &'a Path,
     pub fm: &'a FitMaterial,
+    /// The table's error before storage ([`EngineTable::error`], measured when its size was
+    /// chosen).
+    pub error: InterpolationError,
     pub tolerance: Option<f64>,
     /// A mesh (mm) and its curvature (1/mm), written beside the table as `<stem>.glb`.
     pub mesh: Option<(&'a crate::render::mesh::Mesh, &'a [f64])>,
@@ -449,12 +433,7 @@ pub struct WriteRequest<'a> {
 /// The texture, the shading snippets and the sidecar (in that order, as one set). Returns the
 /// paths written and the sidecar.
 pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, EngineLutJson)> {
-    let with = |ext: &str| {
-        let mut s = req.stem.as_os_str().to_owned();
-        s.push(".");
-        s.push(ext);
-        PathBuf::from(s)
-    };
+    let with = |ext: &str| with_extension(req.stem, ext);
     let image = with(req.encoding.extension());
     let json = with("json");
     let shaders: Vec<(PathBuf, &str)> = req
@@ -528,12 +507,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         Encoding::ExrHalf => 1.0,
         _ => scale,
     };
-    let name = |p: &Path| {
-        p.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let (err, _) = t.error(req.fm);
+    let name = |p: &Path| file_name(p);
     let (stored_err, border_err) = t.stored(req.encoding).error(req.fm);
     let sidecar = EngineLutJson {
         schema: SCHEMA.into(),
@@ -580,7 +554,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         std: serde_json::to_value(&req.fit.std)
             .map_err(|e| Error::invalid(req.fit_path, format!("std: {e}")))?,
         std_source: req.fit.std_source.clone(),
-        interpolation_error: err,
+        interpolation_error: req.error,
         stored_error: stored_err,
         border_error: border_err,
         tolerance: req.tolerance,

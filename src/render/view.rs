@@ -104,8 +104,9 @@ pub fn write(o: ViewOptions) -> Result<ViewReport> {
     let fit_text = std::fs::read_to_string(o.fit).map_err(|e| Error::io(o.fit, e))?;
     let (fit, fm) = read_fit(o.fit)?;
     // The table of the generic preset, as `lut --preset generic` chooses it.
-    let range = [0.0, fm.kappa_max()];
-    let (table, err, _) = preset::choose(&fm, range, crate::render::lut::DEFAULT_TOLERANCE);
+    let (table, err, _, _) =
+        crate::render::job::engine_table(&fm, crate::render::job::TableSize::default(), None)?;
+    let range = table.kappa_range_per_mm;
     let stored = table.stored(Encoding::ExrHalf);
     let scale = table.peak().max(f64::MIN_POSITIVE);
     let half: Vec<u8> = table
@@ -126,11 +127,8 @@ pub fn write(o: ViewOptions) -> Result<ViewReport> {
             fm.light.elevation.to_degrees(),
         ),
     };
-    // The exposure `workbench render` picks: a flat surface facing the light, head-on, at 0.8.
-    let flat = stored.lookup(1.0, 0.0);
-    let peak = flat.iter().fold(0.0f64, |a, &b| a.max(b))
-        * crate::model::fresnel::transmission(1.0, fm.material.eta);
-    let exposure = if peak > 0.0 { 0.8 / peak } else { 1.0 };
+    // The exposure `workbench render` picks, from this table.
+    let exposure = crate::render::job::default_exposure(stored.lookup(1.0, 0.0), fm.material.eta);
     // The fit's figures, copied beside the page.
     let plots = o.fit.parent().unwrap_or(Path::new(".")).join("plots");
     let mut figures: Vec<(PathBuf, String)> = vec![];

@@ -84,24 +84,13 @@ fn kill_everywhere(dir: &Path, args: &[&str], changed: &str) -> usize {
 /// A synthetic 480×320 row of three spheres (20, 15, 12 mm) drawn with `seed`, in `<tmp>/<name>`.
 fn row_session(tmp: &Path, name: &str, seed: &str) -> std::path::PathBuf {
     let s = tmp.join(name);
-    let (code, _, err) = wb(&[
-        "--quiet",
-        "synth",
-        "session",
-        "--out",
-        s.to_str().unwrap(),
-        "--size",
-        "480x320",
-        "--fx",
-        "520",
-        "--radii",
-        "20,15,12",
-        "--layout",
-        "row",
-        "--seed",
-        seed,
-    ]);
-    assert_eq!(code, 0, "{err}");
+    crate::common::synth_session(
+        &s,
+        &[
+            "--size", "480x320", "--fx", "520", "--radii", "20,15,12", "--layout", "row", "--seed",
+            seed,
+        ],
+    );
     s
 }
 

@@ -70,27 +70,33 @@ pub fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
     (a - b).abs() <= rel * b.abs() + abs
 }
 
+/// `workbench --quiet synth session --out <out> <args>`, which must succeed.
+pub fn synth_session(out: &std::path::Path, args: &[&str]) {
+    let (code, _, err) = wb(&[
+        &[
+            "--quiet",
+            "synth",
+            "session",
+            "--out",
+            out.to_str().unwrap(),
+        ][..],
+        args,
+    ]
+    .concat());
+    assert_eq!(code, 0, "{err}");
+}
+
 /// A small synthetic session solved (two spheres, 25 and 12 mm, in one 640×480 photo); `solve`
 /// gets `extra` arguments. Returns the temporary folder and the session folder inside it.
 pub fn solved_row(extra: &[&str]) -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("s");
-    let (code, _, err) = wb(&[
-        "--quiet",
-        "synth",
-        "session",
-        "--out",
-        s.to_str().unwrap(),
-        "--size",
-        "640x480",
-        "--fx",
-        "700",
-        "--radii",
-        "25,12",
-        "--layout",
-        "row",
-    ]);
-    assert_eq!(code, 0, "{err}");
+    synth_session(
+        &s,
+        &[
+            "--size", "640x480", "--fx", "700", "--radii", "25,12", "--layout", "row",
+        ],
+    );
     let (code, _, err) = wb(&[&["--quiet", "solve"][..], extra, &[s.to_str().unwrap()]].concat());
     assert_eq!(code, 0, "{err}");
     (dir, s)
