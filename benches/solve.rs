@@ -16,11 +16,12 @@
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use workbench::fit::joint::ExtensionChoice;
 use workbench::fit::joint::{self, Reduction};
 use workbench::formats::fit::{FitFile, Method};
 use workbench::model::N_PARAMS;
 use workbench::plot::{Layer, Plot, PALETTE};
-use workbench::solve::{self, ExtensionChoice, Options};
+use workbench::solve::{self, Options};
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
 fn detect(dir: &Path) -> f64 {
@@ -38,7 +39,7 @@ fn detect(dir: &Path) -> f64 {
 fn solve_with(dir: &Path, name: &str, f: impl FnOnce(&mut Options)) -> FitFile {
     let mut o = Options::new(dir);
     // The plain model, as docs/measurements.md's tables were measured (its truth has no extension).
-    o.extensions = ExtensionChoice::None;
+    o.fit.extensions = ExtensionChoice::None;
     o.out = Some(dir.join(name));
     f(&mut o);
     solve::run(&o).unwrap()
@@ -63,7 +64,7 @@ fn accuracy(label: &str, cfg: &SessionConfig) {
         ("joint", solve_with(dir.path(), "a.json", |_| {})),
         (
             "joint, irradiance given",
-            solve_with(dir.path(), "b.json", |o| o.irradiance = Some(1.0)),
+            solve_with(dir.path(), "b.json", |o| o.fit.irradiance = Some(1.0)),
         ),
         (
             "paper",
@@ -99,24 +100,11 @@ fn accuracy(label: &str, cfg: &SessionConfig) {
 
 /// One reduction level's fit on a loaded session: solve-stage seconds and the parameters.
 fn level_fit(l: &solve::Loaded, opts: &Options, reduction: Reduction) -> (f64, joint::JointFit) {
-    let setup = joint::Setup {
-        model: workbench::model::Model::default(),
-        light: l.light,
-        highlight_radius: l.highlight_radius,
-        alpha: l.alpha,
-        eta_prior: opts.eta_prior,
-        irradiance: None,
-        reduction,
-        robust: true,
-        extensions: Default::default(),
-        start_sigma0: None,
-        start_light: None,
-        warm: None,
-        light_fit: joint::LightFit::Prior,
-        light_std: l.light_std,
-        floor: l.fit_floor,
-        checks: true,
+    let settings = joint::Settings {
+        eta_prior: opts.fit.eta_prior,
+        ..joint::Settings::default()
     };
+    let setup = joint::Setup::new(&settings, &l.measured, Default::default(), reduction);
     let spheres: Vec<&workbench::fit::observe::SphereData> = l.spheres.iter().collect();
     let t0 = Instant::now();
     let jf = joint::fit_joint(&setup, &spheres);
@@ -182,8 +170,8 @@ fn reduction_curve(label: &str, dir: &Path, t: &SessionTruth, out: &Path) {
                     // The prediction for this level (as `auto` computes it).
                     let sp: Vec<&workbench::fit::observe::SphereData> = l.spheres.iter().collect();
                     let mut pl = workbench::fit::reduce::Pooled::new(
-                        l.light.unwrap_or(Vector3::new(0.0, 0.0, -1.0)),
-                        l.highlight_radius.unwrap_or(0.0),
+                        l.measured.light.unwrap_or(Vector3::new(0.0, 0.0, -1.0)),
+                        l.measured.highlight_radius.unwrap_or(0.0),
                     );
                     for (i, s) in sp.iter().enumerate() {
                         pl.add_sphere(i, &s.obs, Some(&s.px));
@@ -322,7 +310,7 @@ fn pbr(dir: &Path) {
         );
     }
     let auto = solve_with(dir, "fit-bench-auto.json", |o| {
-        o.extensions = ExtensionChoice::Auto
+        o.fit.extensions = ExtensionChoice::Auto
     });
     if let Some(mc) = &auto.model_choice {
         for c in &mc.candidates {

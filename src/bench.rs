@@ -222,7 +222,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         for (name, reduction) in &settings {
             let mut o = Options::new(&dir);
             o.out = Some(dir.join(format!("fit-{}.json", name.replace([' ', '°', '.'], ""))));
-            o.reduction = *reduction;
+            o.fit.reduction = *reduction;
             let f = solve::run(&o)?;
             let err = (0..3)
                 .map(|c| (f.sigma0_mm[c] - truth.sigma0_mm[c]).abs() / truth.sigma0_mm[c])

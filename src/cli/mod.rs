@@ -101,7 +101,7 @@ pub(crate) struct SolveArgs {
     /// auto (chosen by held-out error; needs 4 or more radii), or any of sigma-exponent,
     /// albedo-curvature, two-gaussian (comma-separated; both = the first two).
     #[arg(long, default_value = "default", value_parser = parse_extensions)]
-    pub(crate) extensions: workbench::solve::ExtensionChoice,
+    pub(crate) extensions: workbench::fit::joint::ExtensionChoice,
     /// Start σ0 (mm), one value or r,g,b, instead of the search over the data.
     #[arg(long, value_parser = triple)]
     pub(crate) start_sigma0: Option<[f64; 3]>,

@@ -91,9 +91,9 @@ pub(crate) fn parse_reduce(
 
 pub(crate) fn parse_extensions(
     s: &str,
-) -> std::result::Result<workbench::solve::ExtensionChoice, String> {
+) -> std::result::Result<workbench::fit::joint::ExtensionChoice, String> {
+    use workbench::fit::joint::ExtensionChoice;
     use workbench::fit::joint::Extensions;
-    use workbench::solve::ExtensionChoice;
     match s {
         "default" => return Ok(ExtensionChoice::Default),
         "none" => return Ok(ExtensionChoice::None),

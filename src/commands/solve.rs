@@ -20,39 +20,39 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<Solved> {
     };
     o.holdout = a.holdout;
     if let Some(p) = a.prior {
-        o.eta_prior = p;
+        o.fit.eta_prior = p;
     }
     if let Some(e) = a.irradiance {
         if !(e.is_finite() && e > 0.0) {
             bail!("--irradiance must be a positive number, got {e}");
         }
-        o.irradiance = Some(e);
+        o.fit.irradiance = Some(e);
     }
-    o.reduction = a.reduce;
-    o.robust = !a.no_robust;
-    o.extensions = a.extensions;
+    o.fit.reduction = a.reduce;
+    o.fit.robust = !a.no_robust;
+    o.fit.extensions = a.extensions;
     if let Some(s) = a.start_sigma0 {
         if s.iter().any(|v| v.is_nan() || *v <= 0.0) {
             bail!("--start-sigma0 must be positive");
         }
     }
-    o.start_sigma0 = a.start_sigma0;
-    o.start_light = a.start_light.map(|[az, el]| LightAngles {
+    o.fit.start_sigma0 = a.start_sigma0;
+    o.fit.start_light = a.start_light.map(|[az, el]| LightAngles {
         azimuth: az.to_radians(),
         elevation: el.to_radians(),
     });
     o.redetect = a.redetect;
-    o.light_fit = if a.hold_light {
+    o.fit.light_fit = if a.hold_light {
         workbench::fit::joint::LightFit::Hold
     } else if a.free_light {
         workbench::fit::joint::LightFit::Free
     } else {
         workbench::fit::joint::LightFit::Prior
     };
-    o.jackknife = !a.no_jackknife;
-    o.entry_transmission = a.entry_transmission;
+    o.fit.jackknife = !a.no_jackknife;
+    o.fit.entry_transmission = a.entry_transmission;
     o.plots = a.plots.clone();
-    o.baseline = a.baseline;
+    o.fit.baseline = a.baseline;
     o.quiet = quiet;
     let fit = solve::run(&o).with_context(|| format!("solve {}", a.session.display()))?;
     let out = a

@@ -9,6 +9,7 @@
 //! `"light": "per-image"`, over the whole session ([`crate::detect::highlight::combine_highlights`]).
 //! Photos are processed in parallel (rayon); detection uses no OpenCV.
 
+pub mod found;
 pub mod highlight;
 pub mod overlay;
 pub mod samples;
@@ -20,7 +21,8 @@ use crate::error::{Error, Result};
 use crate::formats::photo::{load_linear_rgb, LinearRgb};
 use crate::formats::session::{self, LightMode, Session};
 use crate::model::LightAngles;
-use highlight::Highlight;
+use found::locate_highlights;
+pub use found::{Found, Silhouette};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
@@ -36,46 +38,6 @@ pub(crate) const BAND_OUTER_PX: f64 = 3.0;
 pub(crate) const LIGHT_FLOOR: f64 = 0.02 * std::f64::consts::PI / 180.0;
 
 use crate::formats::detections::*;
-
-/// A sphere's silhouette as found in one photo (or fitted over several).
-#[derive(Clone, Debug)]
-pub struct Silhouette {
-    pub radius_mm: f64,
-    pub outline: Outline,
-    pub std_px: [f64; 3],
-    pub blur_px: f64,
-    /// Photos the outline was fitted over (more than one: a sphere that stayed put).
-    pub photos: usize,
-    /// Noise level of the photo (luminance units).
-    pub noise: f64,
-    pub edge_points: usize,
-    pub inlier_px: Vec<Vector2<f64>>,
-}
-
-/// Everything found on one sphere, before serialisation.
-#[derive(Clone, Debug)]
-pub struct Found {
-    pub silhouette: Silhouette,
-    /// The highlight, or why there is none.
-    pub highlight: std::result::Result<Highlight, String>,
-}
-
-/// Locate the highlight on every sphere of a photo (once its outlines are final).
-pub(crate) fn locate_highlights(
-    img: &LinearRgb,
-    lum: &Plane,
-    proj: &Projection,
-    spheres: Vec<Silhouette>,
-) -> Vec<Found> {
-    spheres
-        .into_iter()
-        .map(|s| Found {
-            highlight: highlight::find(lum, &img.saturated, proj, &s.outline, s.noise)
-                .map_err(|e| e.0),
-            silhouette: s,
-        })
-        .collect()
-}
 
 /// The backdrop of a photo: a level per band of 16 rows plus a quadratic across the image,
 /// fitted to the medians of 16×16 pixel cells, the cells that stand out of it (spheres, their

@@ -2,7 +2,7 @@
 //! RANSAC kept, the highlight and an arrow toward the light.
 
 use crate::camera::outline::Projection;
-use crate::detect::Found;
+use crate::detect::found::Found;
 use crate::error::{Error, Result};
 use crate::formats::photo::{srgb_encode, LinearRgb};
 use crate::model::LightAngles;

@@ -12,6 +12,7 @@
 //! - `index.html` ([`crate::figures::report`]): all of them with the fit's summary.
 
 use crate::error::{Error, Result};
+use crate::figures::report::Named;
 use crate::fit::observe::SphereData;
 use crate::formats::fit::FitFile;
 use crate::model::{Model, Params};
@@ -33,13 +34,6 @@ const PIXELS: usize = 200_000;
 const SCATTER: usize = 1500;
 /// Cells without data in the residual images.
 const NO_DATA: RGBColor = RGBColor(190, 190, 190);
-
-/// A figure and its file stem, with a caption for the index.
-pub struct Named {
-    pub name: String,
-    pub caption: String,
-    pub figure: Figure,
-}
 
 /// One sphere's pixels with the model's prediction.
 struct Evaluated<'a> {

@@ -5,10 +5,17 @@
 //! (PNG, linked to its SVG).
 
 use crate::error::Result;
-use crate::figures::fitplot::Named;
 use crate::formats::fit::{FitFile, Method};
+use crate::plot::Figure;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
+
+/// A figure and its file stem, with a caption for the index.
+pub struct Named {
+    pub name: String,
+    pub caption: String,
+    pub figure: Figure,
+}
 
 /// Escape text for HTML.
 pub fn escape(s: &str) -> String {

@@ -5,5 +5,7 @@
 pub mod joint;
 pub mod observe;
 pub mod paper;
+pub mod predict;
 pub mod reduce;
+pub mod sigma_grid;
 pub mod solver;

@@ -61,6 +61,25 @@ pub struct SphereData {
     pub crop: Crop,
 }
 
+impl SphereData {
+    /// This sphere's data less a dark floor (radiance units), which becomes its `floor`.
+    pub fn less_floor(&self, floor: [f64; 3]) -> SphereData {
+        SphereData {
+            obs: crate::fit::solver::less_floor(&self.obs, floor),
+            floor: Some(floor),
+            ..self.clone()
+        }
+    }
+}
+
+/// The different radii among the spheres (mm), smallest first.
+pub fn distinct_radii(spheres: &[&SphereData]) -> Vec<f64> {
+    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    radii.sort_by(f64::total_cmp);
+    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    radii
+}
+
 /// A display copy of the photo around a sphere: sRGB 8-bit means of `step` × `step` pixel blocks,
 /// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across. A dark
 /// crop (99th percentile below 0.45 of full scale) is brightened by `gain` (at most 8) so that its

@@ -5,9 +5,10 @@
 //! weighted mean whose standard error is widened by the scatter between radii (Birge ratio) when
 //! they disagree more than their errors allow.
 
-use crate::fit::joint::Prediction;
 use crate::fit::observe::SphereData;
+use crate::fit::predict::{predict, Prediction};
 use crate::fit::reduce::Pooled;
+use crate::fit::sigma_grid::diffuse_start;
 use crate::fit::solver::{self, Obs};
 use crate::formats::fit::RadiusFit;
 use crate::model::fresnel;
@@ -49,7 +50,7 @@ impl PaperFit {
 
     /// Predict a sphere with its radius's fit (a · T(φ; η) · f(θ; σ)).
     pub fn predict(&self, s: &SphereData, max_pixels: usize) -> Prediction {
-        crate::fit::joint::predict(
+        predict(
             &predicting_model(),
             &self.params_for(s.radius_mm),
             s,
@@ -136,7 +137,7 @@ pub fn fit(
             pooled.add_sphere(k, &obs, None);
         }
         let obs = pooled.observations(&pooled.merged(FACTOR));
-        let (s0, a0) = crate::fit::joint::diffuse_start(&model, &obs, &angles, eta, None);
+        let (s0, a0) = diffuse_start(&model, &obs, &angles, eta, None);
         let start = Params::diffuse(s0, a0, eta, angles);
         let mut free = [false; N_PARAMS];
         free[..6].fill(true);

@@ -16,12 +16,13 @@
 //! r_ref ([`Model::reference_radius_mm`]) is where σ0 and the albedo keep their plain meaning.
 //!
 //! The kernel's shape (`kernel_weight` w, `kernel_ratio` s) is the third extension: the blur is a
-//! sum of two Gaussians, f → (1 − w)·f(θ; σ_c) + w·f(θ; s·σ_c) ([`cdrf::mixture`]), one shape
+//! sum of two Gaussians, f → (1 − w)·f(θ; σ_c) + w·f(θ; s·σ_c) ([`mixture::eval`]), one shape
 //! shared by the channels, each channel's width scaled by its σ0 (w = 0: the plain Gaussian).
 
-use crate::model::cdrf::{self, Convolution};
+use crate::model::cdrf::Convolution;
 use crate::model::entry;
 use crate::model::fresnel;
+use crate::model::mixture;
 use crate::model::specular;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -296,14 +297,14 @@ impl Model {
 
     /// The blur profile at θ for a core width σ: one Gaussian or two, of the clamped cosine or
     /// of the transmitted irradiance (`entry_fresnel`, its `d_param` then ∂/∂η).
-    pub(crate) fn profile(&self, m: &Material, theta: f64, sigma: f64) -> cdrf::MixtureEval {
+    pub(crate) fn profile(&self, m: &Material, theta: f64, sigma: f64) -> mixture::MixtureEval {
         let (w, s, conv) = (m.kernel_weight, m.kernel_ratio, self.convolution);
         if self.entry_fresnel {
             entry::with_series(m.eta, |series| {
-                cdrf::mixture(theta, sigma, w, s, Some(series), conv, false)
+                mixture::eval(theta, sigma, w, s, Some(series), conv, false)
             })
         } else {
-            cdrf::mixture(theta, sigma, w, s, None, conv, self.tabulated)
+            mixture::eval(theta, sigma, w, s, None, conv, self.tabulated)
         }
     }
 

@@ -1,6 +1,13 @@
 //! fit.json's contents: each sphere predicted, and the outcome written out with its errors.
 
-use super::*;
+use super::load::{fingerprint, Loaded};
+use super::outcome::Outcome;
+use super::Options;
+use crate::fit::observe::SphereData;
+use crate::fit::predict::{combine_predictions, predict, Prediction, PREDICT_PIXELS};
+use crate::formats::fit::*;
+use crate::model::{idx, LightAngles, N_PARAMS, PARAM_NAMES};
+use std::time::Instant;
 
 /// Each sphere predicted by the fit (the held-out one included), and the held-out radius's
 /// error combined.
@@ -18,7 +25,7 @@ pub(super) fn predictions(
             let p: Prediction = match &outcome.paper {
                 Some(pf) if !is_held(s) => pf.predict(s, PREDICT_PIXELS),
                 // A held-out radius has no per-radius fit: the combined σ0 predicts it.
-                _ => joint::predict(&model, &outcome.params, s, [0.0; 3], PREDICT_PIXELS),
+                _ => predict(&model, &outcome.params, s, [0.0; 3], PREDICT_PIXELS),
             };
             SphereRmse {
                 image: s.image.clone(),
@@ -175,7 +182,7 @@ pub(super) fn fit_file(
         light_fit: outcome.light_fit.clone(),
         light_pull: outcome.light_pull,
         dark_floor: outcome.floor.map(|f| {
-            let e = pixel_scale(&l.report);
+            let e = l.measured.pixel_scale;
             DarkFloorJson {
                 value: f.value.map(|v| v * e),
                 std: f.std.map(|v| v * e),

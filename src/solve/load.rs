@@ -1,8 +1,19 @@
 //! What a solve starts from: the session checked, detections reused or run, the photos decoded
 //! and sampled; and whether an earlier fit.json can stand for this run.
 
-use super::*;
+use super::Options;
+use crate::camera::outline::Projection;
+use crate::detect;
+use crate::error::{Error, Result};
+use crate::fit::joint::Measured;
+use crate::fit::observe::{self, SphereData};
+use crate::formats::detections::{self, Detections};
 use crate::formats::fingerprint::{self, Inputs};
+use crate::formats::fit::{FitFile, Timings, SCHEMA};
+use crate::formats::session::{self, LightMode, Session, SessionReport};
+use nalgebra::Vector3;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 /// Everything loaded before fitting.
 pub struct Loaded {
@@ -11,16 +22,12 @@ pub struct Loaded {
     pub detections_path: PathBuf,
     pub proj: Projection,
     pub spheres: Vec<SphereData>,
-    pub light: Option<Vector3<f64>>,
-    /// The detector's standard error of the light (radians).
-    pub light_std: Option<f64>,
+    /// What the detector and the photos measured: the light and its error, the highlight's
+    /// radius, the lobe's roughness, whether the dark floor is fitted (no photo gave one, and
+    /// all share one exposure), the photos' pixel scale.
+    pub measured: Measured,
     /// Under `"light": "per-image"`: each photo's rotation onto the common light frame.
     pub frames: Option<Vec<nalgebra::Rotation3<f64>>>,
-    pub highlight_radius: Option<f64>,
-    pub alpha: Option<f64>,
-    /// No photo gave a dark floor (lit surroundings, none in session.json) and all share one
-    /// exposure: the floor is fitted with the material ([`Setup::floor`]).
-    pub fit_floor: bool,
     pub skipped: Vec<String>,
     pub timings: Timings,
     /// What the fit is made from: the session's input files and detections.json, by content.
@@ -211,18 +218,22 @@ pub(super) fn load_inspected(
         .windows(2)
         .all(|w| w[0].exposure == w[1].exposure);
     let fit_floor = obs.spheres.iter().all(|s| s.floor.is_none()) && same_exposure;
-    Ok(Loaded {
+    let measured = Measured {
+        light,
+        light_std,
+        highlight_radius,
+        alpha,
         fit_floor,
+        pixel_scale: pixel_scale(&report),
+    };
+    Ok(Loaded {
         report,
         detections,
         detections_path,
         proj,
         spheres: obs.spheres,
-        light,
-        light_std,
+        measured,
         frames,
-        highlight_radius,
-        alpha,
         skipped,
         timings,
         inputs,
@@ -231,24 +242,34 @@ pub(super) fn load_inspected(
 
 /// The options that decide a fit's result (not where it is written, nor progress display).
 pub fn fingerprint(opts: &Options) -> String {
+    let f = &opts.fit;
     format!(
         "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | cdrf {} | baseline {}",
         env!("CARGO_PKG_VERSION"),
         opts.method,
         opts.holdout,
-        opts.eta_prior,
-        opts.irradiance,
-        opts.reduction,
-        opts.robust,
-        opts.extensions,
-        opts.start_sigma0,
-        opts.start_light.map(|l| (l.azimuth, l.elevation)),
-        opts.light_fit.name(),
-        opts.jackknife,
-        opts.entry_transmission,
-        if opts.tabulated { "table" } else { "closed form" },
-        opts.baseline || opts.plots.is_some()
+        f.eta_prior,
+        f.irradiance,
+        f.reduction,
+        f.robust,
+        f.extensions,
+        f.start_sigma0,
+        f.start_light.map(|l| (l.azimuth, l.elevation)),
+        f.light_fit.name(),
+        f.jackknife,
+        f.entry_transmission,
+        if f.tabulated { "table" } else { "closed form" },
+        f.baseline || opts.plots.is_some()
     )
+}
+
+/// Radiance units → pixel values (full scale 1) for a floor shared by photos of one exposure.
+fn pixel_scale(report: &SessionReport) -> f64 {
+    report
+        .images
+        .first()
+        .and_then(|i| i.exposure)
+        .unwrap_or(1.0)
 }
 
 /// A fit.json that can stand for this run: made from inputs of the same content (`now`, and

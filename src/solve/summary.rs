@@ -1,6 +1,6 @@
 //! The one-screen human summary of a fit.
 
-use super::*;
+use crate::formats::fit::*;
 
 /// The one-screen human summary of a fit.
 pub fn summary(f: &FitFile) -> String {

@@ -6,9 +6,10 @@ use crate::common;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
+use workbench::fit::joint::ExtensionChoice;
 use workbench::fit::joint::{Extensions, LightFit, Reduction};
 use workbench::formats::fit::{FitFile, Method};
-use workbench::solve::{self, ExtensionChoice, Options};
+use workbench::solve::{self, Options};
 use workbench::synth::session::{self, SessionConfig, SessionTruth};
 
 /// A 640×480 camera: a quarter of the default's pixels, so that the tests stay fast.
@@ -171,7 +172,7 @@ fn a_known_irradiance_makes_eta_measurable() {
     let dir = guard.path();
     let t = truth(dir);
     // The synthetic light's irradiance is 1 in radiance units (ks = 1 is the physical lobe).
-    let f = solve_with(dir, "fit-irradiance.json", |o| o.irradiance = Some(1.0));
+    let f = solve_with(dir, "fit-irradiance.json", |o| o.fit.irradiance = Some(1.0));
     println!(
         "irradiance 1: η {:.4} ± {:.4} (truth {}), σ0 worst {:.3}%",
         f.eta,
@@ -192,11 +193,11 @@ fn a_bad_start_still_converges() {
     let t = truth(dir);
     // Light 30° off the truth (70°, 20°) and σ0 ten times too large.
     let f = solve_with(dir, "fit-bad-start.json", |o| {
-        o.start_light = Some(workbench::model::LightAngles {
+        o.fit.start_light = Some(workbench::model::LightAngles {
             azimuth: 40f64.to_radians(),
             elevation: 15f64.to_radians(),
         });
-        o.start_sigma0 = Some(t.sigma0_mm.map(|s| 10.0 * s));
+        o.fit.start_sigma0 = Some(t.sigma0_mm.map(|s| 10.0 * s));
     });
     println!(
         "bad start: σ0 worst {:.3}%, light {:.4}°, {} stages",
@@ -243,9 +244,9 @@ fn paper_baseline_and_holdout() {
     // The joint fit with the light held: the detector's light, σ0 still within 1%.
     // (the joint fits here with the model the session was rendered with).
     let held = solve_with(dir, "fit-hold.json", |o| {
-        o.light_fit = LightFit::Hold;
-        o.baseline = true;
-        o.entry_transmission = false;
+        o.fit.light_fit = LightFit::Hold;
+        o.fit.baseline = true;
+        o.fit.entry_transmission = false;
     });
     assert!(Vector3::from(held.light_direction).angle(&dl) < 1e-9);
     // The baseline written beside a joint fit is the paper's method's own result.
@@ -262,7 +263,7 @@ fn paper_baseline_and_holdout() {
     // Holdout: fit without the 15 mm sphere, predict it.
     let h = solve_with(dir, "fit-holdout.json", |o| {
         o.holdout = Some(15.0);
-        o.entry_transmission = false;
+        o.fit.entry_transmission = false;
     });
     // Without --baseline or --plots the baseline is not run.
     assert!(h.baseline.is_none());
@@ -295,9 +296,9 @@ fn every_pixel_and_the_chosen_reduction_agree() {
     let guard = default_session();
     let dir = guard.path();
     let auto = solve_with(dir, "fit-auto.json", |_| {});
-    let all = solve_with(dir, "fit-all.json", |o| o.reduction = Reduction::None);
+    let all = solve_with(dir, "fit-all.json", |o| o.fit.reduction = Reduction::None);
     let coarse = solve_with(dir, "fit-4deg.json", |o| {
-        o.reduction = Reduction::Factor(16)
+        o.fit.reduction = Reduction::Factor(16)
     });
     let z = |f: &FitFile| {
         (0..3)
@@ -360,7 +361,7 @@ fn one_radius_still_fits_with_a_wider_uncertainty() {
     });
     let t = truth(dir.path());
     let f = solve_with(dir.path(), "fit.json", |o| {
-        o.extensions = ExtensionChoice::On(Extensions {
+        o.fit.extensions = ExtensionChoice::On(Extensions {
             sigma_exponent: true,
             albedo_curvature: false,
             two_gaussian: false,
@@ -399,7 +400,7 @@ fn extensions_are_chosen_by_held_out_error() {
         ..SessionConfig::default()
     });
     let f = solve_with(dir.path(), "fit.json", |o| {
-        o.extensions = ExtensionChoice::Auto
+        o.fit.extensions = ExtensionChoice::Auto
     });
     let mc = f.model_choice.as_ref().unwrap();
     for c in &mc.candidates {
@@ -414,7 +415,7 @@ fn extensions_are_chosen_by_held_out_error() {
     // On plain data the plain model is kept.
     let guard = default_session();
     let plain = solve_with(guard.path(), "fit-ext.json", |o| {
-        o.extensions = ExtensionChoice::Auto
+        o.fit.extensions = ExtensionChoice::Auto
     });
     let pc = plain.model_choice.as_ref().unwrap();
     println!("plain data: chosen {} ({})", pc.chosen, pc.reason);
@@ -580,11 +581,11 @@ fn an_unchanged_rerun_reuses_fit_json() {
     assert_eq!(second.sigma0_mm, first.sigma0_mm);
     assert_eq!(second.options, solve::fingerprint(&Options::new(dir)));
     // Other options: solved again.
-    let other = solve_with(dir, "fit-cache.json", |o| o.light_fit = LightFit::Hold);
+    let other = solve_with(dir, "fit-cache.json", |o| o.fit.light_fit = LightFit::Hold);
     assert!(!other.skipped.iter().any(|s| s.starts_with("solve:")));
     // --redetect: solved again.
     let again = solve_with(dir, "fit-cache.json", |o| {
-        o.light_fit = LightFit::Hold;
+        o.fit.light_fit = LightFit::Hold;
         o.redetect = true;
     });
     assert!(!again.skipped.iter().any(|s| s.starts_with("solve:")));
@@ -607,7 +608,7 @@ fn one_light_per_photo() {
         ..SessionConfig::default()
     };
     let shared = make(base.clone());
-    let f_shared = solve_with(shared.path(), "fit.json", |o| o.jackknife = false);
+    let f_shared = solve_with(shared.path(), "fit.json", |o| o.fit.jackknife = false);
     let t = truth(shared.path());
     // The per-image session: each radius rendered alone under its light, then put together.
     let per = tempfile::tempdir().unwrap();
@@ -643,7 +644,7 @@ fn one_light_per_photo() {
         serde_json::to_string_pretty(&sess).unwrap(),
     )
     .unwrap();
-    let f_per = solve_with(per.path(), "fit.json", |o| o.jackknife = false);
+    let f_per = solve_with(per.path(), "fit.json", |o| o.fit.jackknife = false);
     let e_shared = worst(&f_shared.sigma0_mm, &t.sigma0_mm);
     let e_per = worst(&f_per.sigma0_mm, &t.sigma0_mm);
     println!(
@@ -668,10 +669,10 @@ fn one_light_per_photo() {
 fn tabulated_cdrf_fits_as_the_closed_form() {
     let guard = default_session();
     let dir = guard.path();
-    let a = solve_with(dir, "fit-table.json", |o| o.jackknife = false);
+    let a = solve_with(dir, "fit-table.json", |o| o.fit.jackknife = false);
     let b = solve_with(dir, "fit-closed.json", |o| {
-        o.jackknife = false;
-        o.tabulated = false;
+        o.fit.jackknife = false;
+        o.fit.tabulated = false;
     });
     assert!(a.options.contains("cdrf table") && b.options.contains("cdrf closed form"));
     let mut worst = (0.0f64, String::new());

@@ -150,7 +150,7 @@ fn jade_errors_are_covered_or_flagged() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     let l = Vector3::new(l[0], l[1], l[2]);
-    let f = solve(dir.path(), |o| o.entry_transmission = true);
+    let f = solve(dir.path(), |o| o.fit.entry_transmission = true);
     let err = Vector3::from(f.light_direction).angle(&l).to_degrees();
     let pull = f
         .light_pull

@@ -1,6 +1,13 @@
-//! The leave-one-radius-out jackknife of a joint fit.
+//! The leave-one-radius-out jackknife of a joint fit: the spread of the refits joins each
+//! parameter's standard error (docs/uncertainty.md), and each left-out radius is predicted.
 
-use super::*;
+use super::settings::{Extensions, Measured, Reduction, Settings, Setup};
+use super::stages::{fit_joint, JointFit};
+use crate::fit::observe::{self, SphereData};
+use crate::fit::predict::{combine_predictions, predict, Prediction, PREDICT_PIXELS};
+use crate::formats::fit::{HoldoutJson, JackknifeJson};
+use crate::model::{Params, N_PARAMS};
+use std::time::Instant;
 
 /// The jackknife's refits pool pixels in cells of this many × 0.25° at least.
 pub(crate) const JACKKNIFE_CELLS: u32 = 8;
@@ -18,15 +25,15 @@ pub struct Jackknife {
 /// noise alone does not: a model that fits each radius a little differently. Each left-out
 /// radius is predicted by the fit to the others. `None` with fewer than 3 radii.
 pub fn jackknife(
-    opts: &Options,
-    l: &Loaded,
+    settings: &Settings,
+    measured: &Measured,
     fitted: &[&SphereData],
     jf: &JointFit,
     ext: Extensions,
 ) -> Option<Jackknife> {
     use rayon::prelude::*;
     let t = Instant::now();
-    let mut radii = distinct_radii(fitted);
+    let mut radii = observe::distinct_radii(fitted);
     radii.reverse();
     if radii.len() < 3 {
         return None;
@@ -41,14 +48,12 @@ pub fn jackknife(
             let same = |s: &&&SphereData| (s.radius_mm - r).abs() < 1e-9;
             let train: Vec<&SphereData> = fitted.iter().filter(|s| !same(s)).copied().collect();
             let test: Vec<&SphereData> = fitted.iter().filter(same).copied().collect();
-            let mut su = setup(opts, l, ext, reduction);
-            su.warm = Some(jf.fit.params);
-            su.checks = false;
-            let f = joint::fit_joint(&su, &train);
+            let su = Setup::new(settings, measured, ext, reduction).refit(jf.fit.params);
+            let f = fit_joint(&su, &train);
             let preds: Vec<Prediction> = test
                 .iter()
                 .map(|s| {
-                    joint::predict(
+                    predict(
                         &f.model,
                         &f.fit.params,
                         s,
@@ -97,24 +102,4 @@ pub fn jackknife(
             seconds: t.elapsed().as_secs_f64(),
         },
     })
-}
-
-/// Predictions of the spheres of one radius combined (pixel-weighted RMS of each error).
-pub(super) fn combine_predictions(radius_mm: f64, preds: &[Prediction]) -> HoldoutJson {
-    let n: f64 = preds.iter().map(|p| p.pixels as f64).sum::<f64>().max(1.0);
-    let comb = |f: fn(&Prediction) -> f64| {
-        (preds
-            .iter()
-            .map(|p| f(p).powi(2) * p.pixels as f64)
-            .sum::<f64>()
-            / n)
-            .sqrt()
-    };
-    HoldoutJson {
-        radius_mm,
-        pixels: preds.iter().map(|p| p.pixels).sum(),
-        rel_rmse: comb(|p| p.rel_rmse),
-        lit_rel_rmse: comb(|p| p.lit_rel_rmse),
-        unlit_rel_rmse: comb(|p| p.unlit_rel_rmse),
-    }
 }

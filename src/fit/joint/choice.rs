@@ -1,31 +1,11 @@
-//! The joint fit's setup from the options, and the model extensions chosen by held-out error.
+//! The model extensions chosen by held-out error (`--extensions auto`): each candidate fitted
+//! with every radius left out in turn predicts that radius.
 
-use super::*;
-
-pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Reduction) -> Setup {
-    Setup {
-        model: Model {
-            entry_fresnel: opts.entry_transmission,
-            tabulated: opts.tabulated,
-            ..Model::default()
-        },
-        light: l.light,
-        highlight_radius: l.highlight_radius,
-        alpha: l.alpha,
-        eta_prior: opts.eta_prior,
-        irradiance: opts.irradiance,
-        reduction,
-        robust: opts.robust,
-        extensions: ext,
-        start_sigma0: opts.start_sigma0,
-        start_light: opts.start_light,
-        warm: None,
-        light_fit: opts.light_fit,
-        light_std: l.light_std,
-        floor: l.fit_floor && opts.method == Method::Joint,
-        checks: true,
-    }
-}
+use super::settings::{Extensions, Measured, Reduction, Settings, Setup};
+use super::stages::fit_joint;
+use crate::fit::observe::{self, SphereData};
+use crate::fit::predict::predict;
+use crate::formats::fit::{Candidate, ModelChoice};
 
 /// Choose the extensions by held-out error: each candidate is fitted with every radius left out
 /// in turn (4° cells: the choice compares errors of percents, not of standard errors) and
@@ -33,11 +13,11 @@ pub(super) fn setup(opts: &Options, l: &Loaded, ext: Extensions, reduction: Redu
 /// relative RMSE (the simplest within 1% of it) wins if it beats the plain model by more than 2%
 /// of its error.
 pub(crate) fn choose_extensions(
-    opts: &Options,
-    l: &Loaded,
+    settings: &Settings,
+    measured: &Measured,
     fitted: &[&SphereData],
 ) -> (ModelChoice, Extensions) {
-    let radii = distinct_radii(fitted);
+    let radii = observe::distinct_radii(fitted);
     // Simplest first: one extension (the kernel's shape first), then pairs.
     let ext = |two_gaussian, sigma_exponent, albedo_curvature| Extensions {
         sigma_exponent,
@@ -64,10 +44,15 @@ pub(crate) fn choose_extensions(
         return (plain, Extensions::default());
     }
     // Every refit starts from the plain model's fit to all the spheres.
-    let base = joint::fit_joint(
+    let base = fit_joint(
         &Setup {
             checks: false,
-            ..setup(opts, l, Extensions::default(), Reduction::Factor(16))
+            ..Setup::new(
+                settings,
+                measured,
+                Extensions::default(),
+                Reduction::Factor(16),
+            )
         },
         fitted,
     );
@@ -90,13 +75,12 @@ pub(crate) fn choose_extensions(
                 .copied()
                 .filter(|s| s.radius_mm == r)
                 .collect();
-            let mut su = setup(opts, l, ext, Reduction::Factor(16));
-            su.warm = Some(base.fit.params);
-            su.checks = false;
-            let jf = joint::fit_joint(&su, &train);
+            let su =
+                Setup::new(settings, measured, ext, Reduction::Factor(16)).refit(base.fit.params);
+            let jf = fit_joint(&su, &train);
             let (mut d, mut o) = (0.0, 0.0);
             for s in test {
-                let p = joint::predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
+                let p = predict(&jf.model, &jf.fit.params, s, jf.fit.floor_value(), 20_000);
                 d += (p.rel_rmse * p.rel_rmse) * p.pixels as f64;
                 o += p.pixels as f64;
             }

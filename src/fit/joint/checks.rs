@@ -1,0 +1,148 @@
+//! The checks on a joint fit's result, each a note (and a status) rather than a silent number:
+//! clipped pixels, a degenerate covariance, residuals beyond the measured noise, a light beside
+//! the camera, η against its prior, and η from the highlight alone against the whole fit's.
+
+use super::settings::Setup;
+use crate::fit::observe::SphereData;
+use crate::fit::reduce::Pooled;
+use crate::fit::solver::{self, Fit};
+use crate::formats::fit::Stage;
+use crate::model::{idx, N_PARAMS, PARAM_NAMES};
+use nalgebra::Vector3;
+
+/// A light closer than this to the viewing direction (degrees) gets a note: θ ≈ φ.
+pub(crate) const NEAR_VIEW_DEG: f64 = 15.0;
+
+/// Above this χ²/dof (residuals twice the measured noise) the fit warns.
+pub(crate) const CHI2_WARN: f64 = 4.0;
+
+/// Above this fraction of clipped sphere pixels the fit warns.
+pub(crate) const CLIPPED_WARN: f64 = 0.5;
+
+/// A fit whose core parameters have no finite standard error is degenerate, whatever the
+/// optimiser's stopping test said: not a measurement.
+pub(crate) fn degenerate_check(fit: Fit, stages: &mut [Stage], notes: &mut Vec<String>) -> Fit {
+    let mut fit = fit;
+    let core = (0..6).chain([idx::AZIMUTH, idx::ELEVATION]);
+    let singular: Vec<&str> = core
+        .filter(|&k| fit.free[k] && !fit.std[k].is_finite())
+        .map(|k| PARAM_NAMES[k])
+        .collect();
+    if !singular.is_empty() && fit.converged {
+        fit.converged = false;
+        fit.termination = format!(
+            "degenerate: no finite standard error for {}",
+            singular.join(", ")
+        );
+        if let Some(st) = stages.last_mut() {
+            st.converged = false;
+            st.termination = fit.termination.clone();
+        }
+        notes.push(format!(
+            "the fit is degenerate (the covariance is singular for {}): the result is not a measurement — check the detections and the photos' noise and exposure",
+            singular.join(", ")
+        ));
+    }
+    fit
+}
+
+/// With the irradiance given, η is measured by the highlight's height — and, through the
+/// transmissions, by the diffuse shading, the least exact part of the model. η (and α) refitted
+/// on the highlight's pixels alone, the rest held: a disagreement beyond the two formal errors is
+/// flagged and returned, to join η's error as a systematic (docs/uncertainty.md, "η").
+pub(crate) fn eta_from_highlight(
+    setup: &Setup,
+    pooled: &Pooled,
+    specular: bool,
+    fit: &Fit,
+    notes: &mut Vec<String>,
+) -> f64 {
+    let model = setup.model();
+    let mut eta_systematic = 0.0;
+    if setup.settings.irradiance.is_some()
+        && specular
+        && fit.free[idx::ETA]
+        && pooled.kept.len() > 8
+    {
+        let mut hl_free = [false; N_PARAMS];
+        hl_free[idx::ETA] = true;
+        hl_free[idx::ALPHA] = fit.free[idx::ALPHA];
+        let kept = solver::less_floor(&pooled.kept, fit.floor_value());
+        let hl = solver::fit(model, &kept, &fit.params, hl_free, &[]);
+        let (a, b) = (hl.params.material.eta, fit.params.material.eta);
+        let combined = (hl.std[idx::ETA].powi(2) + fit.std[idx::ETA].powi(2)).sqrt();
+        if hl.converged && combined > 0.0 && (a - b).abs() > 3.0 * combined {
+            eta_systematic = (a - b).abs();
+            notes.push(format!(
+                "η = {b:.4} from the joint fit, {a:.4} ± {:.4} from the highlight alone ({:.1} of their errors apart): the diffuse shading pulls η through the transmissions; the difference joins η's std",
+                hl.std[idx::ETA],
+                (a - b).abs() / combined
+            ));
+        }
+    }
+    eta_systematic
+}
+
+/// What the fit's residuals and geometry say about it: the residuals against the measured noise
+/// (returned as χ²/dof), a light beside the camera, and η against its prior. Returns χ²/dof and
+/// the notes.
+pub(crate) fn fit_notes(
+    fit: &Fit,
+    spheres: &[&SphereData],
+    (eta_mean, eta_std): (f64, f64),
+    eta_status: &str,
+) -> (f64, Vec<String>) {
+    let mut notes = vec![];
+    // Goodness of fit against the measured noise (weights are 1/σ per pixel and channel).
+    let dof = fit
+        .residuals
+        .saturating_sub(fit.free.iter().filter(|f| **f).count())
+        .saturating_sub(if fit.floor.is_some() { 3 } else { 0 })
+        .max(1);
+    let chi2 = 2.0 * fit.cost / dof as f64;
+    if chi2 > CHI2_WARN {
+        notes.push(format!(
+            "the residuals are {:.1}× the measured noise (χ²/dof = {chi2:.1}): the model does not describe these photos fully — check the detections (light, outlines); a wrong light or outline biases σ0",
+            chi2.sqrt()
+        ));
+    }
+    // A light beside the camera: θ ≈ φ everywhere, the blur and the exit transmission trade off.
+    let view: Vector3<f64> = spheres
+        .iter()
+        .filter_map(|s| s.obs.first())
+        .map(|o| o.geometry.view)
+        .sum();
+    if view.norm() > 0.0 {
+        let a = fit.params.light.direction().angle(&view).to_degrees();
+        if a < NEAR_VIEW_DEG {
+            notes.push(format!(
+                "the light is {a:.1}° from the camera's direction: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
+            ));
+        }
+    }
+    let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
+    if eta_status.starts_with("prior") && tension > 3.0 {
+        notes.push(format!(
+            "η = {:.4} lies {tension:.1} prior σ from the prior {eta_mean} ± {eta_std}: the prior or the model's fall-off at the rim and the terminator disagrees with the data (its std is scaled for the disagreement); measure η with --irradiance",
+            fit.params.material.eta
+        ));
+    }
+    if eta_status.starts_with("prior") && fit.std[idx::ETA] < 0.5 * eta_std {
+        notes.push(format!(
+            "η = {:.4} (formal ± {:.4}): the data, through the Fresnel transmissions, determine η better than its prior (± {eta_std}); that rests on the model's fall-off at the terminator and the rim",
+            fit.params.material.eta, fit.std[idx::ETA]
+        ));
+    }
+    (chi2, notes)
+}
+
+/// A note when more than [`CLIPPED_WARN`] of the sphere pixels are clipped.
+pub(crate) fn clipped(spheres: &[&SphereData]) -> Option<String> {
+    let (clipped, on) = spheres
+        .iter()
+        .fold((0, 0), |(c, n), s| (c + s.saturated, n + s.pixels));
+    (on > 0 && clipped as f64 > CLIPPED_WARN * on as f64).then(|| format!(
+        "{:.0}% of the sphere pixels are clipped: the fit rests on the rest (near the terminator), where σ0, the albedo and the light trade off — expect biases of several percent; lower the exposure",
+        100.0 * clipped as f64 / on as f64
+    ))
+}

@@ -1,0 +1,257 @@
+//! A joint fit with what the settings ask around it ([`fit_session`]): the extensions (the
+//! default, named, or chosen by held-out error), the light held at the detector's when the shading
+//! pulls it too far, the jackknife, the paper's baseline beside it, and each parameter's stated
+//! standard error from all of them.
+
+use super::baseline::baseline;
+use super::choice::choose_extensions;
+use super::jackknife::{jackknife, Jackknife};
+use super::light::PULL_WARN;
+use super::settings::{
+    ExtensionChoice, Extensions, LightFit, Measured, Settings, Setup, DEFAULT_EXTENSION_RADII,
+};
+use super::stages::{fit_joint, JointFit};
+use crate::fit::observe::{self, SphereData};
+use crate::formats::fit::{BaselineJson, ModelChoice};
+use crate::model::{idx, LightAngles, N_PARAMS, PARAM_NAMES};
+use std::time::Instant;
+
+/// What [`fit_session`] returns.
+pub struct Session {
+    pub fit: JointFit,
+    /// The settings the fit ran with: the light's treatment is `Hold` where a pulled light was held.
+    pub settings: Settings,
+    /// What was skipped, and why.
+    pub skipped: Vec<String>,
+    pub model_choice: Option<ModelChoice>,
+    pub model_choice_s: f64,
+    pub jackknife: Option<Jackknife>,
+    pub baseline: Option<BaselineJson>,
+    /// Each parameter's stated standard error: the formal one or the jackknife's spread, scaled
+    /// for a prior's tension, with the light's systematic (and η's) added in quadrature.
+    pub std: [f64; N_PARAMS],
+    /// How the light was treated ("prior", "free", "hold", "prior, then hold").
+    pub light_fit: String,
+}
+
+/// The joint fit of `fitted` with what `settings` ask around it; the notes join `notes`.
+pub fn fit_session(
+    settings: &Settings,
+    measured: &Measured,
+    fitted: &[&SphereData],
+    notes: &mut Vec<String>,
+) -> Session {
+    let mut skipped = vec![];
+    let (ext, model_choice, model_choice_s) =
+        extensions(settings, measured, fitted, &mut skipped, notes);
+    let first = fit_joint(
+        &Setup::new(settings, measured, ext, settings.reduction),
+        fitted,
+    );
+    let held = hold_pulled_light(settings, measured, fitted, ext, first, notes);
+    let (jf, settings) = (held.fit, held.settings);
+    let jack = if settings.jackknife {
+        let j = jackknife(
+            &settings,
+            measured,
+            fitted,
+            &jf,
+            Extensions::of_fit(&jf.fit.free),
+        );
+        if j.is_none() {
+            skipped.push(
+                "jackknife: fewer than 3 radii, the standard errors are the formal ones".into(),
+            );
+        }
+        j
+    } else {
+        skipped.push(
+            "jackknife: off (--no-jackknife), the standard errors are the formal ones".into(),
+        );
+        None
+    };
+    notes.extend(floor_note(&jf, measured));
+    let baseline = settings
+        .baseline
+        .then(|| baseline(&settings, measured, fitted, jf.fit.floor))
+        .flatten();
+    notes.extend(jf.notes.iter().cloned());
+    skipped.extend(reduction_skips(&jf));
+    let std = stated_std(&jf, jack.as_ref(), &held.light_shift);
+    let light_fit = if held.pulled && settings.light_fit == LightFit::Hold {
+        "prior, then hold".into()
+    } else {
+        settings.light_fit.name().into()
+    };
+    Session {
+        fit: jf,
+        settings,
+        skipped,
+        model_choice,
+        model_choice_s,
+        jackknife: jack,
+        baseline,
+        std,
+        light_fit,
+    }
+}
+
+/// The extensions the settings choose, with the model choice and its seconds under `Auto`.
+fn extensions(
+    settings: &Settings,
+    measured: &Measured,
+    fitted: &[&SphereData],
+    skipped: &mut Vec<String>,
+    notes: &mut Vec<String>,
+) -> (Extensions, Option<ModelChoice>, f64) {
+    match settings.extensions {
+        ExtensionChoice::None => (Extensions::default(), None, 0.0),
+        ExtensionChoice::On(e) => (e, None, 0.0),
+        ExtensionChoice::Default => {
+            let radii = observe::distinct_radii(fitted);
+            if radii.len() >= DEFAULT_EXTENSION_RADII {
+                let e = Extensions {
+                    albedo_curvature: true,
+                    ..Extensions::default()
+                };
+                (e, None, 0.0)
+            } else {
+                skipped.push(format!(
+                    "albedo curvature (the default extension): {} radii, it needs {DEFAULT_EXTENSION_RADII}",
+                    radii.len()
+                ));
+                (Extensions::default(), None, 0.0)
+            }
+        }
+        ExtensionChoice::Auto => {
+            let t = Instant::now();
+            let (mc, e) = choose_extensions(settings, measured, fitted);
+            let seconds = t.elapsed().as_secs_f64();
+            notes.push(format!("model: {} ({})", mc.chosen, mc.reason));
+            (e, Some(mc), seconds)
+        }
+    }
+}
+
+/// The fit after the light's hold, the settings it ran with, and the light's systematic.
+struct Held {
+    fit: JointFit,
+    settings: Settings,
+    /// Per parameter, the light's systematic on it (0 where none).
+    light_shift: [f64; N_PARAMS],
+    /// The shading pulled the light beyond [`PULL_WARN`].
+    pulled: bool,
+}
+
+/// A light pulled beyond [`PULL_WARN`] of the detector's errors is pulled by the model's error,
+/// not supported by the data: it is held at the detector's and the fit repeated. Each parameter's
+/// shift between the two fits is the light's systematic on it and joins its std; a light taken
+/// from the detector keeps the detector's error (docs/uncertainty.md, "When the shading pulls the
+/// light").
+fn hold_pulled_light(
+    settings: &Settings,
+    measured: &Measured,
+    fitted: &[&SphereData],
+    ext: Extensions,
+    first: JointFit,
+    notes: &mut Vec<String>,
+) -> Held {
+    let mut jf = first;
+    let mut fit_settings = *settings;
+    let mut light_shift = [0.0; N_PARAMS];
+    let pulled = jf.light_pull.filter(|p| p.pull > PULL_WARN);
+    if let (LightFit::Prior, Some(pull), Some(_)) = (settings.light_fit, pulled, measured.light) {
+        fit_settings.light_fit = LightFit::Hold;
+        let setup = Setup::new(&fit_settings, measured, ext, settings.reduction);
+        let held = fit_joint(&setup, fitted);
+        let (a, b) = (jf.fit.params.to_vec(), held.fit.params.to_vec());
+        light_shift = std::array::from_fn(|k| {
+            if held.fit.free[k] {
+                (a[k] - b[k]).abs()
+            } else {
+                0.0
+            }
+        });
+        let moved_sigma0: Vec<String> = (0..3)
+            .map(|c| format!("{:.3}", jf.fit.params.material.sigma0_mm[c]))
+            .collect();
+        notes.push(format!(
+            "the light is held at the highlights' estimate: the shading pulled it {:.1} of its errors, further than the data support; with the pulled light σ0 was {} mm, and each parameter's shift between the two fits joins its std",
+            pull.pull,
+            moved_sigma0.join(", ")
+        ));
+        jf = JointFit {
+            light_pull: Some(pull),
+            ..held
+        };
+        let why = format!("held: the detector's (pulled {:.1} std)", pull.pull);
+        jf.status[idx::AZIMUTH] = why.clone();
+        jf.status[idx::ELEVATION] = why;
+    }
+    if fit_settings.light_fit == LightFit::Hold && settings.start_light.is_none() {
+        if let (Some(s), Some(d)) = (measured.light_std, measured.light) {
+            let el = LightAngles::from_direction(&d).elevation;
+            light_shift[idx::AZIMUTH] = s / el.cos().abs().max(1e-3);
+            light_shift[idx::ELEVATION] = s;
+        }
+    }
+    Held {
+        fit: jf,
+        settings: fit_settings,
+        light_shift,
+        pulled: pulled.is_some(),
+    }
+}
+
+/// The note for a dark floor fitted with the material, in pixel values.
+fn floor_note(jf: &JointFit, measured: &Measured) -> Option<String> {
+    let fl = jf.fit.floor?;
+    let e = measured.pixel_scale;
+    let show = |v: [f64; 3]| v.map(|x| format!("{:.5}", x * e)).join(", ");
+    Some(format!(
+        "no dark floor measured (the photos around the spheres are lit): fitted with the material, {} ± {} of full scale (r, g, b), and subtracted before the predictions and figures",
+        show(fl.value),
+        show(fl.std)
+    ))
+}
+
+/// What the fit left out: the lobe, pixels pooled, parameters resting on their priors.
+fn reduction_skips(jf: &JointFit) -> Vec<String> {
+    let mut skipped = vec![];
+    if !jf.specular {
+        skipped.push("specular lobe: off (no usable highlight)".into());
+    }
+    skipped.push(if jf.chosen.width_deg > 0.0 {
+        format!(
+            "pixels: {} pooled into {} observations ({}° cells, predicted shift {:.2} std)",
+            jf.pixels, jf.chosen.observations, jf.chosen.width_deg, jf.chosen.predicted_shift_std
+        )
+    } else {
+        format!("pixels: all {} used", jf.pixels)
+    });
+    for (name, st) in PARAM_NAMES.iter().zip(&jf.status) {
+        if st.starts_with("prior") {
+            skipped.push(format!("{name}: {st}"));
+        }
+    }
+    skipped
+}
+
+/// Each parameter's stated standard error (docs/uncertainty.md): the larger of the formal error
+/// and the jackknife's spread, scaled by its prior's tension, with the light's systematic in
+/// quadrature (and, for η, the disagreement with the highlight alone).
+fn stated_std(
+    jf: &JointFit,
+    jack: Option<&Jackknife>,
+    light_shift: &[f64; N_PARAMS],
+) -> [f64; N_PARAMS] {
+    std::array::from_fn(|k| {
+        let spread = jack.map_or(0.0, |j| j.std[k]);
+        let s = (jf.fit.std[k].max(spread) * jf.prior_tension[k]).hypot(light_shift[k]);
+        if k == idx::ETA {
+            s.hypot(jf.eta_systematic)
+        } else {
+            s
+        }
+    })
+}

@@ -1,0 +1,39 @@
+//! What a solve is asked: the job's own options (where, which method, what to reuse, which
+//! figures) and the fit's settings ([`Settings`], the one settings type of a fit).
+
+use crate::fit::joint::Settings;
+use crate::formats::fit::Method;
+use std::path::PathBuf;
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub session: PathBuf,
+    /// Where fit.json goes (default: beside session.json).
+    pub out: Option<PathBuf>,
+    pub method: Method,
+    /// A radius left out of the fit and predicted.
+    pub holdout: Option<f64>,
+    /// Run detection even when detections.json is up to date.
+    pub redetect: bool,
+    /// Where the figures go (the paper's baseline is then run beside a joint fit: its curves are
+    /// drawn).
+    pub plots: Option<PathBuf>,
+    pub quiet: bool,
+    /// The fit's settings.
+    pub fit: Settings,
+}
+
+impl Options {
+    pub fn new(session: impl Into<PathBuf>) -> Options {
+        Options {
+            session: session.into(),
+            out: None,
+            method: Method::Joint,
+            holdout: None,
+            redetect: false,
+            plots: None,
+            quiet: true,
+            fit: Settings::default(),
+        }
+    }
+}
