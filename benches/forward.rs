@@ -133,7 +133,7 @@ fn bench_synth(c: &mut Criterion) {
 /// The solver's hot kernel: model + gradient for every observation, accumulated into JᵀJ and Jᵀr
 /// (what one Levenberg–Marquardt evaluation costs), on one core and on all cores.
 fn bench_normal_equations(c: &mut Criterion) {
-    use workbench::fit::solver::{to_unbounded, Obs, Problem};
+    use workbench::fit::solver::{self, Obs};
     let n = 100_000;
     let model = Model::default();
     let params = params();
@@ -148,15 +148,6 @@ fn bench_normal_equations(c: &mut Criterion) {
     let mut free = [true; workbench::model::N_PARAMS];
     free[workbench::model::idx::SIGMA_EXPONENT] = false;
     free[workbench::model::idx::ALBEDO_CURVATURE] = false;
-    let problem = |model: Model| Problem {
-        model,
-        obs: &obs,
-        free,
-        u: to_unbounded(&params.to_vec()),
-        priors: vec![],
-        history: None,
-        floor: false,
-    };
     let mut g = c.benchmark_group("normal_equations_100k");
     g.throughput(Throughput::Elements(n as u64));
     g.sample_size(20);
@@ -176,9 +167,10 @@ fn bench_normal_equations(c: &mut Criterion) {
             .num_threads(threads)
             .build()
             .unwrap();
-        let problem = problem(model);
         g.bench_function(format!("{threads}_threads{suffix}"), |b| {
-            b.iter(|| pool.install(|| black_box(problem.normal_equations())))
+            b.iter(|| {
+                pool.install(|| black_box(solver::normal_equations(model, &obs, &params, free)))
+            })
         });
     }
     g.finish();

@@ -7,7 +7,6 @@
 // `!(x > 0.0)` is how the argument checks reject NaN along with the out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod bench;
 pub mod calibrate;
 pub mod camera;
 pub mod detect;

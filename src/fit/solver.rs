@@ -103,6 +103,26 @@ pub struct Problem<'a> {
     pub floor: bool,
 }
 
+/// One evaluation of the solver's kernel: the normal equations JᵀJ, Jᵀr of `obs` at `params`
+/// with the parameters in `free` fitted (no priors, no dark floor), accumulated in parallel.
+pub fn normal_equations(
+    model: Model,
+    obs: &[Obs],
+    params: &Params,
+    free: [bool; N_PARAMS],
+) -> Normal {
+    Problem {
+        model,
+        obs,
+        free,
+        u: to_unbounded(&params.to_vec()),
+        priors: vec![],
+        history: None,
+        floor: false,
+    }
+    .normal_equations()
+}
+
 /// The dark floor per channel as profiled out of a fit: its value (the observations' units) and
 /// standard error.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

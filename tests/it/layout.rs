@@ -21,7 +21,6 @@ const LAYERS: &[&[&str]] = &[
     &["solve"],
     &["render"],
     &["synth"],
-    &["bench"],
 ];
 
 fn layer(module: &str) -> Option<usize> {

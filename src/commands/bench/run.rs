@@ -6,18 +6,18 @@
 //! gives each setting's time and error and the solve stage's time against decoding the photos,
 //! both measured in the same run.
 
-use crate::detect;
-use crate::error::{Error, Result};
-use crate::fit::joint::Reduction;
-use crate::plot::{Layer, Plot, PALETTE};
-use crate::solve::{self, Options};
-use crate::synth::session::{self, Format, SessionConfig, SessionTruth};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use workbench::detect;
+use workbench::error::{Error, Result};
+use workbench::fit::joint::Reduction;
+use workbench::plot::{Layer, Plot, PALETTE};
+use workbench::solve::{self, Options};
+use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
 
-pub(crate) const SCHEMA: &str = "workbench.bench/1";
+pub(super) const SCHEMA: &str = "workbench.bench/1";
 
 #[derive(Clone, Debug)]
 pub struct BenchOptions {
@@ -105,7 +105,7 @@ fn config(d: &Data) -> SessionConfig {
 }
 
 /// The reduction settings the solve offers, every-pixel first.
-pub(crate) fn reductions() -> Vec<(String, Reduction)> {
+pub(super) fn reductions() -> Vec<(String, Reduction)> {
     let mut v = vec![("every pixel".to_string(), Reduction::None)];
     for f in [1u32, 2, 4, 8, 16] {
         v.push((format!("{}° cells", f as f64 * 0.25), Reduction::Factor(f)));
@@ -165,7 +165,7 @@ fn checkerboard_dir(opts: &BenchOptions) -> PathBuf {
 }
 
 fn mark_dir(dir: &Path) -> Result<()> {
-    crate::formats::output::write_bytes(&dir.join(MARK), b"made by workbench bench\n")
+    workbench::formats::output::write_bytes(&dir.join(MARK), b"made by workbench bench\n")
 }
 
 /// Run the benchmark and write its report into `opts.out`.
@@ -183,7 +183,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let settings = reductions();
     let steps = data.len() * (2 + settings.len()) + 1;
-    let pb = crate::progress::bar(steps as u64, "bench", opts.quiet);
+    let pb = workbench::progress::bar(steps as u64, "bench", opts.quiet);
     let mut rows = vec![];
     #[cfg(feature = "opencv")]
     {
@@ -195,7 +195,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         fresh_dir(&dir)?;
         session::generate(&config(d), &dir, None, true)?;
         mark_dir(&dir)?;
-        let truth: SessionTruth = crate::formats::output::read_json(&dir.join("truth.json"))?;
+        let truth: SessionTruth = workbench::formats::output::read_json(&dir.join("truth.json"))?;
         pb.inc(1);
         let t = Instant::now();
         let det = detect::run(&detect::Options {
@@ -262,15 +262,15 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         opts.out.join("report.md"),
         opts.out.join("error-vs-time"),
     );
-    let set = crate::formats::output::OutputSet::begin(&[
+    let set = workbench::formats::output::OutputSet::begin(&[
         &json,
         &md,
         &fig.with_extension("png"),
         &fig.with_extension("svg"),
     ]);
-    crate::formats::output::write_bytes(&md, markdown(&report).as_bytes())?;
+    workbench::formats::output::write_bytes(&md, markdown(&report).as_bytes())?;
     error_vs_time(&report).save(&fig)?;
-    crate::formats::output::write_json(&json, &report)?;
+    workbench::formats::output::write_json(&json, &report)?;
     set.commit()?;
     Ok(report)
 }
@@ -280,11 +280,11 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
 /// the closed form; the table's error is the largest difference of JᵀJ relative to its largest
 /// entry. Seconds are per evaluation (the best of five).
 fn kernel_rows(dir: &Path, name: &str) -> Result<Vec<Row>> {
-    use crate::fit::solver::{to_unbounded, Obs, Problem};
-    use crate::model::{Model, N_PARAMS};
+    use workbench::fit::solver::{self, Obs};
+    use workbench::model::{Model, N_PARAMS};
     let l = solve::load(&Options::new(dir))?;
-    let fit: crate::formats::fit::FitFile =
-        crate::formats::output::read_json(&dir.join("fit-auto.json"))?;
+    let fit: workbench::formats::fit::FitFile =
+        workbench::formats::output::read_json(&dir.join("fit-auto.json"))?;
     let obs: Vec<Obs> = l
         .spheres
         .iter()
@@ -292,28 +292,21 @@ fn kernel_rows(dir: &Path, name: &str) -> Result<Vec<Row>> {
         .collect();
     let mut free = [false; N_PARAMS];
     free[..11].fill(true);
+    let params = fit.params();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .map_err(|e| Error::Argument(format!("thread pool: {e}")))?;
     let run = |tabulated: bool| {
-        let problem = Problem {
-            model: Model {
-                tabulated,
-                ..fit.model()
-            },
-            obs: &obs,
-            free,
-            u: to_unbounded(&fit.params().to_vec()),
-            priors: vec![],
-            history: None,
-            floor: false,
+        let model = Model {
+            tabulated,
+            ..fit.model()
         };
         let mut best = f64::INFINITY;
         let mut ne = None;
         for _ in 0..5 {
             let t = Instant::now();
-            ne = Some(pool.install(|| problem.normal_equations()));
+            ne = Some(pool.install(|| solver::normal_equations(model, &obs, &params, free)));
             best = best.min(t.elapsed().as_secs_f64());
         }
         (best, ne.expect("five runs").jtj)
@@ -344,8 +337,8 @@ fn kernel_rows(dir: &Path, name: &str) -> Result<Vec<Row>> {
 
 #[cfg(feature = "opencv")]
 fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
-    use crate::calibrate::{run as cal, DetectorChoice};
-    use crate::synth::checkerboard::{self, CheckerConfig};
+    use workbench::calibrate::{run as cal, DetectorChoice};
+    use workbench::synth::checkerboard::{self, CheckerConfig};
     let mut cam = session::default_camera();
     cam.fx *= 0.5;
     cam.fy *= 0.5;
@@ -382,8 +375,8 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
         let t = Instant::now();
         let r = cal::run(
             &o,
-            &crate::calibrate::cv::OpenCvDetect,
-            &crate::calibrate::cv::OpenCv,
+            &workbench::calibrate::cv::OpenCvDetect,
+            &workbench::calibrate::cv::OpenCv,
         )?;
         let c = &r.calibration.camera;
         rows.push(Row {

@@ -1,11 +1,13 @@
-//! `workbench bench`: time and error of every stage.
+//! `workbench bench`: time and error of every stage, over the library's public API ([`run`]).
 
 use super::Report;
 use crate::cli::*;
 use anyhow::{Context, Result};
 use std::fmt;
 use std::path::PathBuf;
-use workbench::bench;
+
+mod run;
+use run as bench;
 
 pub(crate) fn bench(a: BenchArgs, quiet: bool) -> Result<Benched> {
     let out = a.out.unwrap_or_else(bench::default_out);
