@@ -38,7 +38,7 @@ fn detect(dir: &Path) -> f64 {
 
 fn solve_with(dir: &Path, name: &str, f: impl FnOnce(&mut Options)) -> FitFile {
     let mut o = Options::new(dir);
-    // The plain model, as docs/measurements.md's tables were measured (its truth has no extension).
+    // The plain model, as docs/measurements/solve.md's tables were measured (its truth has no extension).
     o.fit.extensions = ExtensionChoice::None;
     o.out = Some(dir.join(name));
     f(&mut o);

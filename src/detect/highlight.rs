@@ -672,7 +672,7 @@ impl Combined {
 
 /// The least error the spheres of a session share (radians): on the project's own renders the
 /// combined light lies 0.01–0.05° from the truth with formal errors of 0.012–0.016° (black, grey
-/// card, table; docs/measurements.md), the same sign on every sphere, so averaging does not remove it.
+/// card, table; docs/measurements/detection.md), the same sign on every sphere, so averaging does not remove it.
 pub(crate) const SHARED_FLOOR: f64 = 0.03 * std::f64::consts::PI / 180.0;
 
 /// Combine highlights' lights ([`combine`]); the trend-model error, shared by every sphere and so

@@ -718,7 +718,7 @@ pub fn fit(
 /// A last step that lowers a cost of m residuals by 10⁻¹⁰ of itself moves the parameters by
 /// √(2·10⁻¹⁰·m) standard errors (0.01 for the demo's 460 000), and the converging steps shrink
 /// quadratically: the fits stopped at 10⁻¹⁰ differ from those at 30ε by at most 0.0005 formal
-/// standard errors on the demo and the physically based sessions (docs/measurements.md,
+/// standard errors on the demo and the physically based sessions (docs/measurements/speed.md,
 /// "Solve: fixed costs").
 pub(crate) const LM_TOL: f64 = 1e-10;
 

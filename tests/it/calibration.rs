@@ -358,7 +358,7 @@ mod with_opencv {
 
     /// OpenCV's own sample photos (../shared/data/opencv-left): all 13 views, intrinsics as
     /// OpenCV's Python bindings give them with the same flags (`benches/cv2_calibrate.py`,
-    /// docs/measurements.md: fx 533.35, fy 533.43, cx 342.18, cy 234.06, k1 −0.2903, RMS 0.1772;
+    /// docs/measurements/calibration.md: fx 533.35, fy 533.43, cx 342.18, cy 234.06, k1 −0.2903, RMS 0.1772;
     /// measured within 0.01 px, printed to 0.01: 0.03 allowed).
     #[test]
     fn opencv_sample_photos() {

@@ -1,5 +1,5 @@
 //! The integration tests as one crate, a module per area: the suite links the OpenCV-backed
-//! library once instead of once per file (docs/measurements.md, "Build and suite time").
+//! library once instead of once per file (docs/measurements/speed.md, "Build and suite time").
 
 mod common;
 
