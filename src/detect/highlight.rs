@@ -273,95 +273,178 @@ fn solve(fit: &Fit, pix: &[Px], mut x: Vector3<f64>) -> Option<Solution> {
     Some((x, r, c, j))
 }
 
-/// Find the highlight on one sphere. `lum` is the luminance, `saturated` the clipped pixels,
-/// `noise` the image noise level (image units) used to judge significance.
-pub fn find(
-    lum: &Plane,
-    saturated: &[bool],
-    proj: &Projection,
-    outline: &Outline,
-    noise: f64,
-) -> Result<Highlight, NoHighlight> {
-    let r_px = outline.radius_px(proj);
-    let [bx0, by0, bx1, by1] = outline
-        .pixel_box(proj, 0.0, lum.width, lum.height)
-        .ok_or_else(|| NoHighlight("the sphere leaves the image".into()))?;
-    let (bw, bh) = ((bx1 - bx0 + 1) as usize, (by1 - by0 + 1) as usize);
-    let w = lum.width as usize;
-    // Geometry of every pixel well inside the silhouette.
-    let mut surf: Vec<Option<(Vector3<f64>, Vector3<f64>)>> = vec![None; bw * bh];
-    for j in 0..bh {
-        for i in 0..bw {
-            let px = Vector2::new((bx0 as usize + i) as f64, (by0 as usize + j) as f64);
-            if let Some(q) = proj.point(px) {
-                if outline.s(&q) < 0.97 {
-                    if let Some(s) = outline.surface(&q) {
-                        surf[j * bw + i] = Some((s.normal, s.view));
+/// The sphere's pixels as the highlight search sees them: its bounding box, the geometry of
+/// every pixel well inside the silhouette, and which of those are clipped.
+struct Area<'a> {
+    lum: &'a Plane,
+    saturated: &'a [bool],
+    proj: &'a Projection,
+    outline: &'a Outline,
+    /// The box's first pixel and size.
+    x0: u32,
+    y0: u32,
+    bw: usize,
+    bh: usize,
+    /// The sphere's radius in the image (pixels).
+    r_px: f64,
+    /// Per box pixel: (normal, view) where it is well inside the silhouette.
+    surf: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
+    /// Per box pixel: clipped and inside.
+    clipped: Vec<bool>,
+}
+
+/// A lobe fit's last pass: the light, α, the residual variance, the lobe's amplitude, the trend
+/// at the peak, the Jacobian and the basis its angles step along, the unclipped pixels; and the
+/// pass itself (fit, pixels, parameters) for the trend checks.
+struct LobePass {
+    light: Vector3<f64>,
+    alpha: f64,
+    sigma2: f64,
+    amp: f64,
+    trend: f64,
+    jac: DMatrix<f64>,
+    basis: (Vector3<f64>, Vector3<f64>),
+    unclipped: usize,
+    fit: Fit,
+    pix: Vec<Px>,
+    x: Vector3<f64>,
+}
+
+/// The clipped core around the highlight, as angles on the sphere (from its radius, a normal
+/// angle): the half-vector patch that holds the unclipped ring around it, and the highlight's
+/// radius for the solve (6° past the core). Both 0 without a core.
+struct Core {
+    ring: f64,
+    past: f64,
+}
+
+impl Core {
+    fn of(blob: Option<&crate::detect::silhouette::Blob>, r_px: f64) -> Core {
+        let angle = blob.map_or(0.0, |b| {
+            ((b.area as f64 / std::f64::consts::PI).sqrt() / r_px)
+                .min(1.0)
+                .asin()
+        });
+        let (ring, past) = if angle > 0.0 {
+            (
+                (2.0 * angle + 4f64.to_radians()).min(45f64.to_radians()),
+                angle + 6f64.to_radians(),
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        Core { ring, past }
+    }
+}
+
+impl<'a> Area<'a> {
+    fn of(
+        lum: &'a Plane,
+        saturated: &'a [bool],
+        proj: &'a Projection,
+        outline: &'a Outline,
+    ) -> Result<Area<'a>, NoHighlight> {
+        let r_px = outline.radius_px(proj);
+        let [bx0, by0, bx1, by1] = outline
+            .pixel_box(proj, 0.0, lum.width, lum.height)
+            .ok_or_else(|| NoHighlight("the sphere leaves the image".into()))?;
+        let (bw, bh) = ((bx1 - bx0 + 1) as usize, (by1 - by0 + 1) as usize);
+        let w = lum.width as usize;
+        let mut surf: Vec<Option<(Vector3<f64>, Vector3<f64>)>> = vec![None; bw * bh];
+        for j in 0..bh {
+            for i in 0..bw {
+                let px = Vector2::new((bx0 as usize + i) as f64, (by0 as usize + j) as f64);
+                if let Some(q) = proj.point(px) {
+                    if outline.s(&q) < 0.97 {
+                        if let Some(s) = outline.surface(&q) {
+                            surf[j * bw + i] = Some((s.normal, s.view));
+                        }
                     }
                 }
             }
         }
+        let mut clipped = vec![false; bw * bh];
+        for j in 0..bh {
+            for i in 0..bw {
+                let k = (by0 as usize + j) * w + bx0 as usize + i;
+                if saturated[k] && surf[j * bw + i].is_some() {
+                    clipped[j * bw + i] = true;
+                }
+            }
+        }
+        Ok(Area {
+            lum,
+            saturated,
+            proj,
+            outline,
+            x0: bx0,
+            y0: by0,
+            bw,
+            bh,
+            r_px,
+            surf,
+            clipped,
+        })
     }
-    // Peak candidate: the largest excess of a 3×3 mean over a wide local mean (R/6 box), which
-    // favours a compact highlight over the broad diffuse maximum.
-    // Means over interior pixels only (integral images of values and counts), so the dark
-    // background beyond the rim does not make the rim look like a peak.
-    let mut integ = vec![0.0f64; (bw + 1) * (bh + 1)];
-    let mut count = vec![0.0f64; (bw + 1) * (bh + 1)];
-    for j in 0..bh {
-        for i in 0..bw {
-            let inside = surf[j * bw + i].is_some();
-            let v = if inside {
-                lum.at(bx0 + i as u32, by0 + j as u32) as f64
-            } else {
-                0.0
+
+    /// The image pixel of box pixel (i, j).
+    fn pixel(&self, i: usize, j: usize) -> Vector2<f64> {
+        Vector2::new((self.x0 as usize + i) as f64, (self.y0 as usize + j) as f64)
+    }
+
+    /// Peak candidate: the largest excess of a 3×3 mean over a wide local mean (R/6 box), which
+    /// favours a compact highlight over the broad diffuse maximum; means over interior pixels
+    /// only (integral images of values and counts), so the dark background beyond the rim does
+    /// not make the rim look like a peak. Returns the excess and the box pixel.
+    fn peak(&self) -> Option<(f64, usize, usize)> {
+        let (bw, bh) = (self.bw, self.bh);
+        let mut integ = vec![0.0f64; (bw + 1) * (bh + 1)];
+        let mut count = vec![0.0f64; (bw + 1) * (bh + 1)];
+        for j in 0..bh {
+            for i in 0..bw {
+                let inside = self.surf[j * bw + i].is_some();
+                let v = if inside {
+                    self.lum.at(self.x0 + i as u32, self.y0 + j as u32) as f64
+                } else {
+                    0.0
+                };
+                let k = (j + 1) * (bw + 1) + i + 1;
+                integ[k] = v + integ[k - (bw + 1)] + integ[k - 1] - integ[k - bw - 2];
+                count[k] = f64::from(u8::from(inside)) + count[k - (bw + 1)] + count[k - 1]
+                    - count[k - bw - 2];
+            }
+        }
+        let box_mean = |i: usize, j: usize, r: usize| {
+            let (a0, b0) = (i.saturating_sub(r), j.saturating_sub(r));
+            let (a1, b1) = ((i + r + 1).min(bw), (j + r + 1).min(bh));
+            let rect = |t: &[f64]| {
+                t[b1 * (bw + 1) + a1] - t[b0 * (bw + 1) + a1] - t[b1 * (bw + 1) + a0]
+                    + t[b0 * (bw + 1) + a0]
             };
-            let k = (j + 1) * (bw + 1) + i + 1;
-            integ[k] = v + integ[k - (bw + 1)] + integ[k - 1] - integ[k - bw - 2];
-            count[k] = f64::from(u8::from(inside)) + count[k - (bw + 1)] + count[k - 1]
-                - count[k - bw - 2];
-        }
-    }
-    let box_mean = |i: usize, j: usize, r: usize| {
-        let (a0, b0) = (i.saturating_sub(r), j.saturating_sub(r));
-        let (a1, b1) = ((i + r + 1).min(bw), (j + r + 1).min(bh));
-        let rect = |t: &[f64]| {
-            t[b1 * (bw + 1) + a1] - t[b0 * (bw + 1) + a1] - t[b1 * (bw + 1) + a0]
-                + t[b0 * (bw + 1) + a0]
+            rect(&integ) / rect(&count).max(1.0)
         };
-        rect(&integ) / rect(&count).max(1.0)
-    };
-    let wide = ((r_px / 6.0).round() as usize).max(3);
-    let mut best: Option<(f64, usize, usize)> = None;
-    for j in 0..bh {
-        for i in 0..bw {
-            if surf[j * bw + i].is_none() {
-                continue;
-            }
-            let e = box_mean(i, j, 1) - box_mean(i, j, wide);
-            if best.is_none_or(|b| e > b.0) {
-                best = Some((e, i, j));
-            }
-        }
-    }
-    let Some((excess, pi, pj)) = best else {
-        return Err(NoHighlight("sphere too small to search".into()));
-    };
-    let peak = Vector2::new((bx0 as usize + pi) as f64, (by0 as usize + pj) as f64);
-    // Saturated pixels inside the sphere: the blob nearest the peak.
-    let mut sat_mask = vec![false; bw * bh];
-    let mut any_sat = false;
-    for j in 0..bh {
-        for i in 0..bw {
-            let k = (by0 as usize + j) * w + bx0 as usize + i;
-            if saturated[k] && surf[j * bw + i].is_some() {
-                sat_mask[j * bw + i] = true;
-                any_sat = true;
+        let wide = ((self.r_px / 6.0).round() as usize).max(3);
+        let mut best: Option<(f64, usize, usize)> = None;
+        for j in 0..bh {
+            for i in 0..bw {
+                if self.surf[j * bw + i].is_none() {
+                    continue;
+                }
+                let e = box_mean(i, j, 1) - box_mean(i, j, wide);
+                if best.is_none_or(|b| e > b.0) {
+                    best = Some((e, i, j));
+                }
             }
         }
+        best
     }
-    let sat_blob = if any_sat {
-        blobs(&sat_mask, bw as u32, bh as u32, None)
+
+    /// The clipped blob (2 px at least) nearest box pixel (pi, pj).
+    fn clipped_blob(&self, pi: usize, pj: usize) -> Option<crate::detect::silhouette::Blob> {
+        if !self.clipped.iter().any(|&m| m) {
+            return None;
+        }
+        blobs(&self.clipped, self.bw as u32, self.bh as u32, None)
             .into_iter()
             .filter(|b| b.area >= 2)
             .min_by(|a, b| {
@@ -369,33 +452,18 @@ pub fn find(
                 let db = (b.centroid - Vector2::new(pi as f64, pj as f64)).norm();
                 da.total_cmp(&db)
             })
-    } else {
-        None
-    };
-    // More than half the disc clipped is clipped diffuse shading, not a highlight.
-    let clipped = sat_mask.iter().filter(|&&m| m).count();
-    let disc = std::f64::consts::PI * r_px * r_px;
-    let clipped_frac = clipped as f64 / disc;
-    if clipped_frac > MAX_CLIPPED {
-        return Err(NoHighlight(format!(
-            "{clipped} px ({:.0}% of the sphere) clipped: lower the exposure",
-            100.0 * clipped_frac
-        )));
     }
-    let start_px = match &sat_blob {
-        Some(b) => Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y),
-        None => peak,
-    };
-    let light_at = |px: Vector2<f64>| -> Option<Vector3<f64>> {
-        let s = outline.surface(&proj.point(px)?)?;
+
+    /// The light a mirror point at this pixel implies.
+    fn light_at(&self, px: Vector2<f64>) -> Option<Vector3<f64>> {
+        let s = self.outline.surface(&self.proj.point(px)?)?;
         Some(reflect(&s.normal, &s.view))
-    };
-    let Some(l_start) = light_at(start_px) else {
-        return Err(NoHighlight("peak outside the sphere".into()));
-    };
-    // Intensity-weighted centroid of the excess over a local plane (fitted on a 3 px ring
-    // around a disc of radius rw): sub-pixel even for a blob of a few clipped pixels.
-    let weighted = |c0: Vector2<f64>, rw: f64| -> Option<Vector2<f64>> {
+    }
+
+    /// Intensity-weighted centroid of the excess over a local plane (fitted on a 3 px ring
+    /// around a disc of radius rw): sub-pixel even for a blob of a few clipped pixels.
+    fn weighted(&self, c0: Vector2<f64>, rw: f64) -> Option<Vector2<f64>> {
+        let (lum, w) = (self.lum, self.lum.width as usize);
         let (x0, x1) = (
             (c0.x - rw - 4.0).floor().max(0.0) as u32,
             ((c0.x + rw + 4.0).ceil() as u32).min(lum.width - 1),
@@ -410,7 +478,7 @@ pub fn find(
             for x in x0..=x1 {
                 let d = Vector2::new(x as f64, y as f64) - c0;
                 let r = d.norm();
-                if r > rw && r <= rw + 3.0 && !saturated[y as usize * w + x as usize] {
+                if r > rw && r <= rw + 3.0 && !self.saturated[y as usize * w + x as usize] {
                     let a = Vector3::new(1.0, d.x, d.y);
                     ata += a * a.transpose();
                     atb += a * lum.at(x, y) as f64;
@@ -431,138 +499,182 @@ pub fn find(
             }
         }
         (sw > 0.0).then(|| c0 + sp / sw)
-    };
-    // The centroid method, from a start pixel and a window radius (px).
-    let centroid =
-        |start: Vector2<f64>, rw: f64, clipped: usize| -> Result<Highlight, NoHighlight> {
-            let mut c = start;
-            for _ in 0..3 {
-                c = weighted(c, rw).unwrap_or(c);
-            }
-            let l =
-                light_at(c).ok_or_else(|| NoHighlight("highlight outside the sphere".into()))?;
-            // A quarter-pixel position error, mapped through the reflection.
-            let mut jm = Matrix3x2::zeros();
-            for k in 0..2 {
-                let mut d = Vector2::zeros();
-                d[k] = 0.5;
-                let (a, b2) = (light_at(c + d), light_at(c - d));
-                let (Some(a), Some(b2)) = (a, b2) else {
-                    return Err(NoHighlight("highlight at the silhouette".into()));
-                };
-                jm.set_column(k, &(a - b2));
-            }
-            let cov = jm * Matrix2::identity() * 0.0625 * jm.transpose();
-            Ok(Highlight {
-                px: c,
-                light: l,
-                cov,
-                method: Method::Centroid,
-                alpha: None,
-                saturated: clipped,
-                radius: (rw / r_px).min(1.0).asin() * 2.0 + 0.02,
-                trend_spread: 0.0,
-            })
-        };
-    // Lobe fit in two passes: a 30° patch of half-vector angles (or the ring around a clipped
-    // core) tried from three roughnesses (the best fit with a positive lobe wins), then a patch
-    // sized by the fitted α.
-    let mut result = None;
-    let mut l0 = l_start;
-    let mut starts = LOBE_STARTS.to_vec();
-    let mut last = None;
-    // Angular radius (normal angle) of the clipped core around the highlight.
-    let core_angle = sat_blob.as_ref().map_or(0.0, |b| {
-        ((b.area as f64 / std::f64::consts::PI).sqrt() / r_px)
-            .min(1.0)
-            .asin()
-    });
-    // The patch that holds the unclipped ring around a clipped core (half-vector angle).
-    let ring_angle = if core_angle > 0.0 {
-        (2.0 * core_angle + 4f64.to_radians()).min(45f64.to_radians())
-    } else {
-        0.0
-    };
-    // The highlight's radius for the solve: 6° past a clipped core.
-    let past_core = if core_angle > 0.0 {
-        core_angle + 6f64.to_radians()
-    } else {
-        0.0
-    };
-    // The first pass's patch: 30°, or the ring around a larger clipped core (a patch inside the
-    // core leaves the fit only spikes between its few unclipped pixels).
-    let mut theta_max = 30f64.to_radians().max(ring_angle);
-    for _pass in 0..2 {
+    }
+
+    /// The centroid method, from a start pixel and a window radius (px).
+    fn centroid(
+        &self,
+        start: Vector2<f64>,
+        rw: f64,
+        clipped: usize,
+    ) -> Result<Highlight, NoHighlight> {
+        let mut c = start;
+        for _ in 0..3 {
+            c = self.weighted(c, rw).unwrap_or(c);
+        }
+        let l = self
+            .light_at(c)
+            .ok_or_else(|| NoHighlight("highlight outside the sphere".into()))?;
+        // A quarter-pixel position error, mapped through the reflection.
+        let mut jm = Matrix3x2::zeros();
+        for k in 0..2 {
+            let mut d = Vector2::zeros();
+            d[k] = 0.5;
+            let (a, b2) = (self.light_at(c + d), self.light_at(c - d));
+            let (Some(a), Some(b2)) = (a, b2) else {
+                return Err(NoHighlight("highlight at the silhouette".into()));
+            };
+            jm.set_column(k, &(a - b2));
+        }
+        let cov = jm * Matrix2::identity() * 0.0625 * jm.transpose();
+        Ok(Highlight {
+            px: c,
+            light: l,
+            cov,
+            method: Method::Centroid,
+            alpha: None,
+            saturated: clipped,
+            radius: (rw / self.r_px).min(1.0).asin() * 2.0 + 0.02,
+            trend_spread: 0.0,
+        })
+    }
+
+    /// The centroid of a clipped blob.
+    fn blob_centroid(&self, b: &crate::detect::silhouette::Blob) -> Result<Highlight, NoHighlight> {
+        let c = Vector2::new(self.x0 as f64 + b.centroid.x, self.y0 as f64 + b.centroid.y);
+        self.centroid(
+            c,
+            (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0,
+            b.area,
+        )
+    }
+
+    /// The pixels whose half-vector for light `l0` lies within `theta_max` of their normal.
+    fn patch(&self, l0: &Vector3<f64>, theta_max: f64) -> Vec<Px> {
         let mut pix = vec![];
-        for j in 0..bh {
-            for i in 0..bw {
-                let Some((n, v)) = surf[j * bw + i] else {
+        for j in 0..self.bh {
+            for i in 0..self.bw {
+                let Some((n, v)) = self.surf[j * self.bw + i] else {
                     continue;
                 };
                 let h = (l0 + v).normalize();
                 if n.dot(&h).min(1.0).acos() < theta_max {
-                    let px = Vector2::new((bx0 as usize + i) as f64, (by0 as usize + j) as f64);
+                    let px = self.pixel(i, j);
                     pix.push(Px {
                         px,
                         n,
                         v,
-                        value: lum.at(px.x as u32, px.y as u32) as f64,
-                        clipped: sat_mask[j * bw + i],
+                        value: self.lum.at(px.x as u32, px.y as u32) as f64,
+                        clipped: self.clipped[j * self.bw + i],
                     });
                 }
             }
         }
-        let unclipped = pix.iter().filter(|p| !p.clipped).count();
-        if unclipped < 20 {
-            result = None;
-            break;
-        }
-        let (e1, e2) = tangent_basis(&l0);
-        let fit = Fit {
-            l0,
-            anchor: l_start,
-            e1,
-            e2,
-            center: start_px,
-            scale: theta_max.sin() * r_px,
-            trend: Trend::Image,
-        };
-        let best_of = |starts: &[f64]| {
-            starts
-                .iter()
-                .filter_map(|&a0: &f64| solve(&fit, &pix, Vector3::new(0.0, 0.0, a0.ln())))
-                // A lobe at the smallest roughness is a spike inside a clipped core, which the
-                // censored pixels cannot refute: not a candidate.
-                .filter(|(x, _, c, _)| {
-                    c[NLIN - 1] > 0.0 && (MIN_ALPHA..MAX_ALPHA).contains(&x.z.exp())
-                })
-                .min_by(|a, b| a.1.norm_squared().total_cmp(&b.1.norm_squared()))
-        };
-        // The second pass starts from the first one's α, and from the three starts again when
-        // that runs off (a patch grown around a large clipped core can lead it to a spike).
-        let best = best_of(&starts)
-            .or_else(|| (starts.len() == 1).then(|| best_of(&LOBE_STARTS)).flatten());
-        let Some((x, r, c, j)) = best else {
-            result = None;
-            break;
-        };
-        let l = fit.light(&x);
-        let alpha = x.z.exp();
-        let dof = unclipped.saturating_sub(NLIN + 3).max(1) as f64;
-        let sigma2 = r.norm_squared() / dof;
-        let amp = c[NLIN - 1] * pix.iter().map(|p| shape(p, &l, alpha)).fold(0.0, f64::max);
-        let trend_at_peak = c[0];
-        result = Some((l, alpha, sigma2, amp, trend_at_peak, j, e1, e2, unclipped));
-        last = Some((fit, pix, x));
-        l0 = l;
-        starts = vec![alpha];
-        // At least twice the clipped core's angular radius: its ring is what locates the lobe.
-        theta_max = (3.0 * alpha)
-            .atan()
-            .max(ring_angle)
-            .clamp(6f64.to_radians(), 45f64.to_radians());
+        pix
     }
-    let fitted = result.and_then(|(l, alpha, sigma2, amp, trend, j, b1, b2, npix)| {
+
+    /// Lobe fit in two passes: a 30° patch of half-vector angles (or the ring around a clipped
+    /// core) tried from three roughnesses (the best fit with a positive lobe wins), then a patch
+    /// sized by the fitted α. `None` when a pass has too few unclipped pixels or no lobe.
+    fn lobe_fit(
+        &self,
+        l_start: Vector3<f64>,
+        start_px: Vector2<f64>,
+        core: &Core,
+    ) -> Option<LobePass> {
+        let mut result = None;
+        let mut l0 = l_start;
+        let mut starts = LOBE_STARTS.to_vec();
+        // The first pass's patch: 30°, or the ring around a larger clipped core (a patch inside
+        // the core leaves the fit only spikes between its few unclipped pixels).
+        let mut theta_max = 30f64.to_radians().max(core.ring);
+        for _pass in 0..2 {
+            let pix = self.patch(&l0, theta_max);
+            let unclipped = pix.iter().filter(|p| !p.clipped).count();
+            if unclipped < 20 {
+                return None;
+            }
+            let (e1, e2) = tangent_basis(&l0);
+            let fit = Fit {
+                l0,
+                anchor: l_start,
+                e1,
+                e2,
+                center: start_px,
+                scale: theta_max.sin() * self.r_px,
+                trend: Trend::Image,
+            };
+            let best_of = |starts: &[f64]| {
+                starts
+                    .iter()
+                    .filter_map(|&a0: &f64| solve(&fit, &pix, Vector3::new(0.0, 0.0, a0.ln())))
+                    // A lobe at the smallest roughness is a spike inside a clipped core, which
+                    // the censored pixels cannot refute: not a candidate.
+                    .filter(|(x, _, c, _)| {
+                        c[NLIN - 1] > 0.0 && (MIN_ALPHA..MAX_ALPHA).contains(&x.z.exp())
+                    })
+                    .min_by(|a, b| a.1.norm_squared().total_cmp(&b.1.norm_squared()))
+            };
+            // The second pass starts from the first one's α, and from the three starts again
+            // when that runs off (a patch grown around a large clipped core can lead it to a
+            // spike).
+            let best = best_of(&starts)
+                .or_else(|| (starts.len() == 1).then(|| best_of(&LOBE_STARTS)).flatten());
+            let (x, r, c, j) = best?;
+            let l = fit.light(&x);
+            let alpha = x.z.exp();
+            let dof = unclipped.saturating_sub(NLIN + 3).max(1) as f64;
+            let amp = c[NLIN - 1] * pix.iter().map(|p| shape(p, &l, alpha)).fold(0.0, f64::max);
+            result = Some(LobePass {
+                light: l,
+                alpha,
+                sigma2: r.norm_squared() / dof,
+                amp,
+                trend: c[0],
+                jac: j,
+                basis: (e1, e2),
+                unclipped,
+                fit,
+                pix,
+                x,
+            });
+            l0 = l;
+            starts = vec![alpha];
+            // At least twice the clipped core's angular radius: its ring is what locates the lobe.
+            theta_max = (3.0 * alpha)
+                .atan()
+                .max(core.ring)
+                .clamp(6f64.to_radians(), 45f64.to_radians());
+        }
+        result
+    }
+
+    /// A lobe fit as a highlight, when it is significant (6σ over the noise, 2% of the trend) and
+    /// plausible (α inside its range, 20 unclipped pixels), and the lobe fitted with the other
+    /// kind of diffuse trend lies near it: the light is their midpoint, and half their distance
+    /// (or the shift when the clipped pixels are left out rather than censored) enters its
+    /// covariance, isotropic in the tangent plane — an error of the trend model that σ²(JᵀJ)⁻¹
+    /// does not see (a broad lobe trades with the shading under it).
+    fn lobe_highlight(
+        &self,
+        pass: LobePass,
+        noise: f64,
+        clipped_area: usize,
+        core: &Core,
+    ) -> Option<Highlight> {
+        let LobePass {
+            light: l,
+            alpha,
+            sigma2,
+            amp,
+            trend,
+            jac: j,
+            basis: (b1, b2),
+            unclipped: npix,
+            fit,
+            pix,
+            x,
+        } = pass;
         let significant = amp > 6.0 * sigma2.sqrt().max(noise) && amp > 0.02 * trend.abs();
         let plausible = interior(alpha) && npix >= 20;
         if !(significant && plausible) {
@@ -572,29 +684,21 @@ pub fn find(
         // The angles are steps along the last pass's basis (b1, b2) at its start direction.
         let e = Matrix3x2::from_columns(&[b1, b2]);
         let c2 = Matrix2::new(cov3[(0, 0)], cov3[(0, 1)], cov3[(1, 0)], cov3[(1, 1)]);
-        // For a lobe worth keeping, the lobe against the other kind of diffuse trend, on the last
-        // pass's pixels: how far the two lights lie apart is an error of the trend model that
-        // σ²(JᵀJ)⁻¹ does not see (a broad lobe trades with the shading under it). The light is
-        // their midpoint, and half their distance enters its covariance, isotropic in the
-        // tangent plane.
-        let shading_light = last.as_ref().and_then(|(fit, pix, x)| {
+        let shading_light = {
             let f2 = Fit {
                 trend: Trend::Shading,
-                ..*fit
+                ..fit
             };
-            let (x2, _, lin, _) = solve(&f2, pix, *x)?;
-            (lin[NLIN - 1] > 0.0).then(|| f2.light(&x2))
-        });
-        // And with the clipped pixels left out rather than censored: how much the clipped core's
-        // treatment matters.
-        let uncensored_light = last.as_ref().and_then(|(fit, pix, x)| {
-            if !pix.iter().any(|p| p.clipped) {
-                return None;
-            }
+            solve(&f2, &pix, x)
+                .and_then(|(x2, _, lin, _)| (lin[NLIN - 1] > 0.0).then(|| f2.light(&x2)))
+        };
+        let uncensored_light = if pix.iter().any(|p| p.clipped) {
             let kept: Vec<Px> = pix.iter().filter(|p| !p.clipped).copied().collect();
-            let (x2, _, lin, _) = solve(fit, &kept, *x)?;
-            (lin[NLIN - 1] > 0.0).then(|| fit.light(&x2))
-        });
+            solve(&fit, &kept, x)
+                .and_then(|(x2, _, lin, _)| (lin[NLIN - 1] > 0.0).then(|| fit.light(&x2)))
+        } else {
+            None
+        };
         let (l, spread) = match shading_light {
             Some(l2) if l2.angle(&l) < 0.35 => {
                 let mid = (l + l2).normalize();
@@ -605,8 +709,8 @@ pub fn find(
             // not measured by this highlight.
             _ => return None,
         };
-        let q = outline.mirror_point(&l)?;
-        let px = proj.pixel(&q)?;
+        let q = self.outline.mirror_point(&l)?;
+        let px = self.proj.pixel(&q)?;
         let tangent = Matrix3::identity() - l * l.transpose();
         Some(Highlight {
             px,
@@ -614,37 +718,72 @@ pub fn find(
             cov: e * c2 * e.transpose() + tangent * spread * spread,
             method: Method::LobeFit,
             alpha: Some(alpha),
-            saturated: sat_blob.as_ref().map_or(0, |b| b.area),
+            saturated: clipped_area,
             // Past a clipped core: the solve keeps the pixels within this radius for the lobe,
             // and one inside the core left it none (0.9° of light error at 26% clipped). 6° past
             // the core, not the whole ring the fit used: the ring's outer pixels cost the solved
             // light (0.017° against 0.010° at 6% clipped) and time.
-            radius: (3.0 * alpha).atan().max(2f64.to_radians()).max(past_core),
+            radius: (3.0 * alpha).atan().max(2f64.to_radians()).max(core.past),
             trend_spread: spread,
         })
-    });
+    }
+}
+
+/// Find the highlight on one sphere. `lum` is the luminance, `saturated` the clipped pixels,
+/// `noise` the image noise level (image units) used to judge significance. The steps: the
+/// sphere's pixels, the peak candidate, the clipped blob nearest it, the lobe fit from the blob
+/// or the peak, and the choice between the lobe and a centroid.
+pub fn find(
+    lum: &Plane,
+    saturated: &[bool],
+    proj: &Projection,
+    outline: &Outline,
+    noise: f64,
+) -> Result<Highlight, NoHighlight> {
+    let area = Area::of(lum, saturated, proj, outline)?;
+    let Some((excess, pi, pj)) = area.peak() else {
+        return Err(NoHighlight("sphere too small to search".into()));
+    };
+    let peak = area.pixel(pi, pj);
+    let sat_blob = area.clipped_blob(pi, pj);
+    // More than half the disc clipped is clipped diffuse shading, not a highlight.
+    let clipped = area.clipped.iter().filter(|&&m| m).count();
+    let disc = std::f64::consts::PI * area.r_px * area.r_px;
+    let clipped_frac = clipped as f64 / disc;
+    if clipped_frac > MAX_CLIPPED {
+        return Err(NoHighlight(format!(
+            "{clipped} px ({:.0}% of the sphere) clipped: lower the exposure",
+            100.0 * clipped_frac
+        )));
+    }
+    let start_px = match &sat_blob {
+        Some(b) => Vector2::new(area.x0 as f64 + b.centroid.x, area.y0 as f64 + b.centroid.y),
+        None => peak,
+    };
+    let Some(l_start) = area.light_at(start_px) else {
+        return Err(NoHighlight("peak outside the sphere".into()));
+    };
+    let core = Core::of(sat_blob.as_ref(), area.r_px);
+    let clipped_area = sat_blob.as_ref().map_or(0, |b| b.area);
+    let fitted = area
+        .lobe_fit(l_start, start_px, &core)
+        .and_then(|pass| area.lobe_highlight(pass, noise, clipped_area, &core));
     // A clipped highlight whose lobe spans only a few pixels is located better by the centroid
     // of its clipped blob than by a lobe fitted to the handful of pixels around it.
-    let resolved = |h: &Highlight| h.alpha.is_some_and(|a| a * r_px >= RESOLVED_PX);
-    let blob_centroid = |b: &crate::detect::silhouette::Blob| {
-        let c = Vector2::new(bx0 as f64 + b.centroid.x, by0 as f64 + b.centroid.y);
-        centroid(
-            c,
-            (b.area as f64 / std::f64::consts::PI).sqrt() + 3.0,
-            b.area,
-        )
-    };
+    let resolved = |h: &Highlight| h.alpha.is_some_and(|a| a * area.r_px >= RESOLVED_PX);
     match (fitted, &sat_blob) {
-        (Some(h), Some(b)) if !resolved(&h) && clipped_frac <= CENTROID_CLIPPED => blob_centroid(b),
-        (Some(h), None) if !resolved(&h) => centroid(
+        (Some(h), Some(b)) if !resolved(&h) && clipped_frac <= CENTROID_CLIPPED => {
+            area.blob_centroid(b)
+        }
+        (Some(h), None) if !resolved(&h) => area.centroid(
             h.px,
-            (3.0 * h.alpha.unwrap_or(0.0) * r_px).max(2.0) + 1.0,
+            (3.0 * h.alpha.unwrap_or(0.0) * area.r_px).max(2.0) + 1.0,
             0,
         ),
         (Some(h), _) => Ok(h),
         // The centroid of a large clipped core is pulled by the diffuse shading under it: only a
         // small one is located that way.
-        (None, Some(b)) if clipped_frac <= CENTROID_CLIPPED => blob_centroid(b),
+        (None, Some(b)) if clipped_frac <= CENTROID_CLIPPED => area.blob_centroid(b),
         (None, Some(_)) => Err(NoHighlight(format!(
             "{clipped} px ({:.0}% of the sphere) clipped, and the unclipped ring around them does not determine the lobe (no significant, plausible fit): lower the exposure",
             100.0 * clipped_frac
