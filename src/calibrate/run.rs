@@ -91,7 +91,29 @@ fn name(p: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// Run the whole calibration.
+/// The readable images of the folder (all of one size), with their EXIF, and those that could
+/// not be read.
+struct Images {
+    list: Vec<(String, Gray8, Option<ExifInfo>)>,
+    /// Image files found.
+    read: usize,
+    size: [u32; 2],
+    /// Images that gave no view, with the reason.
+    unusable: Vec<(String, String)>,
+}
+
+/// A detector's result on one image: not run (`None`), no board (`Some(None)`) or corners.
+type Found = Option<Corners>;
+
+/// Per image: the classic and the sector-based detector's results, and a detector's error.
+struct Found2 {
+    found: Vec<[Found; 2]>,
+    errors: Vec<Option<String>>,
+}
+
+/// Run the whole calibration: read the images, the pattern, the corners by each detector, the
+/// views (each with the detector the first camera explains better), the calibration and its
+/// EXIF checks, then the outputs as one set.
 pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result<Report> {
     let t0 = std::time::Instant::now();
     if !(opts.square_mm.is_finite() && opts.square_mm > 0.0) {
@@ -100,6 +122,73 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             opts.square_mm
         )));
     }
+    let mut images = read_images(opts)?;
+    let pattern = pattern_of(opts, detect, &images)?;
+    let object = pattern.object_points(opts.square_mm);
+    let found = detect_corners(opts, detect, backend, &images, pattern, &object)?;
+    let detection_s = t0.elapsed().as_secs_f64();
+    let t1 = std::time::Instant::now();
+    let runs = |d: Detector| {
+        found
+            .found
+            .iter()
+            .filter(|f| f[d as usize].is_some())
+            .count()
+    };
+    let detector_note = format!(
+        "detectors: classic run on {} image(s), sector-based on {}",
+        runs(Detector::Classic),
+        runs(Detector::SectorBased)
+    );
+    let candidates = candidates(&mut images, &found, pattern);
+    if candidates.len() < 3 {
+        return Err(no_view(&opts.dir, images.read, &images.unusable));
+    }
+    let views = choose_views(backend, candidates, &object, images.size)?;
+    let mut cal = calibrate(backend, views, &object, images.size)?;
+    cal.notes.insert(0, detector_note);
+    for (f, why) in &images.unusable {
+        cal.reports.push(ViewReport {
+            file: f.clone(),
+            rms_px: None,
+            status: why.clone(),
+        });
+    }
+    cal.reports.sort_by(|a, b| a.file.cmp(&b.file));
+    let exif_notes = exif_checks(
+        &images
+            .list
+            .iter()
+            .map(|(f, _, e)| (f.clone(), e.clone()))
+            .collect::<Vec<_>>(),
+        cal.camera.fx,
+        images.size,
+    );
+    cal.warnings.extend(
+        exif_notes
+            .iter()
+            .filter(|n| n.starts_with("warning: "))
+            .map(|n| n[9..].to_string()),
+    );
+    let calibration_s = t1.elapsed().as_secs_f64();
+    let written = write_outputs(opts, detect, &cal, pattern, &object, &images, &exif_notes)?;
+    Ok(Report {
+        calibration: cal,
+        pattern,
+        images_read: images.read,
+        unusable: images.unusable,
+        exif_notes,
+        intrinsics_file: written.intrinsics_file,
+        yaml_file: written.yaml_file,
+        exports: written.exports,
+        plot_files: written.plot_files,
+        detection_s,
+        calibration_s,
+    })
+}
+
+/// Decode every image of the folder (in parallel) with its EXIF; one size for all.
+fn read_images(opts: &Options) -> Result<Images> {
     let files = image_files(&opts.dir)?;
     if files.is_empty() {
         return Err(Error::invalid(
@@ -118,55 +207,65 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         .collect();
     pb.finish_and_clear();
     let mut unusable: Vec<(String, String)> = vec![];
-    let mut images: Vec<(String, Gray8, Option<ExifInfo>)> = vec![];
+    let mut list: Vec<(String, Gray8, Option<ExifInfo>)> = vec![];
     for (p, r) in loaded {
         match r {
-            Ok((g, e)) => images.push((name(&p), g, e)),
+            Ok((g, e)) => list.push((name(&p), g, e)),
             Err(e) => unusable.push((
                 name(&p),
                 format!("unreadable: {}", one_line(&e.to_string())),
             )),
         }
     }
-    let images_read = files.len();
-    let size = match images.first() {
+    let read = files.len();
+    let size = match list.first() {
         Some((_, g, _)) => [g.width, g.height],
-        None => return Err(no_view(&opts.dir, images_read, &unusable)),
+        None => return Err(no_view(&opts.dir, read, &unusable)),
     };
-    if let Some((f, g, _)) = images.iter().find(|(_, g, _)| [g.width, g.height] != size) {
+    if let Some((f, g, _)) = list.iter().find(|(_, g, _)| [g.width, g.height] != size) {
         return Err(Error::invalid(
             opts.dir.join(f),
             format!(
                 "image is {}×{} but {} is {}×{}: one calibration needs one image size",
-                g.width, g.height, images[0].0, size[0], size[1]
+                g.width, g.height, list[0].0, size[0], size[1]
             ),
         ));
     }
-    let pattern = match opts.pattern {
-        Some(p) => p,
-        None => {
-            let mut found = None;
-            for (_, g, _) in images.iter().take(8) {
-                if let Some(p) = detect.guess_pattern(g)? {
-                    found = Some(p);
-                    break;
-                }
-            }
-            found.ok_or_else(|| {
-                Error::invalid(&opts.dir, "no chessboard of a common size found in the first images: give --pattern COLSxROWS (inner corners)")
-            })?
+    Ok(Images {
+        list,
+        read,
+        size,
+        unusable,
+    })
+}
+
+/// The pattern given, or the first one found in the first eight images.
+fn pattern_of(opts: &Options, detect: &dyn Detect, images: &Images) -> Result<Pattern> {
+    if let Some(p) = opts.pattern {
+        return Ok(p);
+    }
+    for (_, g, _) in images.list.iter().take(8) {
+        if let Some(p) = detect.guess_pattern(g)? {
+            return Ok(p);
         }
-    };
-    let object = pattern.object_points(opts.square_mm);
-    // Detections per image: [classic, sector-based], each not run (None), no board (Some(None))
-    // or corners.
-    type Found = Option<Corners>;
-    let mut found: Vec<[Found; 2]> = vec![[None, None]; images.len()];
-    let mut errors: Vec<Option<String>> = vec![None; images.len()];
-    let run_pass = |which: Detector,
-                    todo: &[usize],
-                    found: &mut Vec<[Found; 2]>,
-                    errors: &mut Vec<Option<String>>| {
+    }
+    Err(Error::invalid(
+        &opts.dir,
+        "no chessboard of a common size found in the first images: give --pattern COLSxROWS (inner corners)",
+    ))
+}
+
+impl Found2 {
+    /// One detector on the images `todo`, in parallel.
+    fn pass(
+        &mut self,
+        which: Detector,
+        todo: &[usize],
+        opts: &Options,
+        detect: &dyn Detect,
+        images: &Images,
+        pattern: Pattern,
+    ) {
         let pb = crate::progress::bar(
             todo.len() as u64,
             &format!("{} detector", which.name()),
@@ -175,7 +274,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         let res: Vec<(usize, Result<Corners>)> = todo
             .par_iter()
             .map(|&i| {
-                let r = detect.detect(&images[i].1, pattern, which, opts.subpix_window);
+                let r = detect.detect(&images.list[i].1, pattern, which, opts.subpix_window);
                 pb.inc(1);
                 (i, r)
             })
@@ -183,14 +282,37 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         pb.finish_and_clear();
         for (i, r) in res {
             match r {
-                Ok(c) => found[i][which as usize] = Some(c),
-                Err(e) => errors[i] = Some(e.to_string()),
+                Ok(c) => self.found[i][which as usize] = Some(c),
+                Err(e) => self.errors[i] = Some(e.to_string()),
             }
         }
+    }
+
+    /// An image's corners by one detector, when it found the board.
+    fn corners(&self, i: usize, d: Detector) -> Corners {
+        self.found[i][d as usize].clone().flatten()
+    }
+}
+
+/// The corners by the detectors `opts` chooses: classic, sector-based, both, or (auto) classic
+/// with the sector-based detector where the classic one found no board or where the first
+/// camera explains its corners badly.
+fn detect_corners(
+    opts: &Options,
+    detect: &dyn Detect,
+    backend: &dyn Backend,
+    images: &Images,
+    pattern: Pattern,
+    object: &[nalgebra::Vector3<f64>],
+) -> Result<Found2> {
+    let n = images.list.len();
+    let mut f = Found2 {
+        found: vec![[None, None]; n],
+        errors: vec![None; n],
     };
-    let all: Vec<usize> = (0..images.len()).collect();
+    let all: Vec<usize> = (0..n).collect();
     if opts.detector != DetectorChoice::SectorBased {
-        run_pass(Detector::Classic, &all, &mut found, &mut errors);
+        f.pass(Detector::Classic, &all, opts, detect, images, pattern);
     }
     let sb_todo: Vec<usize> = match opts.detector {
         DetectorChoice::Classic => vec![],
@@ -198,15 +320,21 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         DetectorChoice::Auto => all
             .iter()
             .cloned()
-            .filter(|&i| !matches!(found[i][0], Some(Some(_))))
+            .filter(|&i| !matches!(f.found[i][0], Some(Some(_))))
             .collect(),
     };
-    run_pass(Detector::SectorBased, &sb_todo, &mut found, &mut errors);
-    let corners_of = |f: &[Found; 2], d: Detector| f[d as usize].clone().flatten();
+    f.pass(
+        Detector::SectorBased,
+        &sb_todo,
+        opts,
+        detect,
+        images,
+        pattern,
+    );
     let usable: Vec<usize> = all
         .iter()
         .cloned()
-        .filter(|&i| found[i].iter().any(|f| matches!(f, Some(Some(_)))))
+        .filter(|&i| f.found[i].iter().any(|x| matches!(x, Some(Some(_)))))
         .collect();
     if usable.len() >= 3 && opts.detector == DetectorChoice::Auto {
         // Views whose classic corners the first camera explains badly get the sector-based
@@ -214,67 +342,79 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         let first: Vec<Vec<Vector2<f64>>> = usable
             .iter()
             .map(|&i| {
-                corners_of(&found[i], Detector::Classic)
-                    .or_else(|| corners_of(&found[i], Detector::SectorBased))
+                f.corners(i, Detector::Classic)
+                    .or_else(|| f.corners(i, Detector::SectorBased))
                     .unwrap_or_default()
             })
             .collect();
         let refs: Vec<&[Vector2<f64>]> = first.iter().map(|v| v.as_slice()).collect();
-        let sol = backend.calibrate(&refs, &object, size, super::DistortionModel::K1K2P1P2)?;
+        let sol =
+            backend.calibrate(&refs, object, images.size, super::DistortionModel::K1K2P1P2)?;
         let errs: Vec<f64> = refs
             .iter()
             .zip(&sol.poses)
-            .map(|(v, p)| super::rms(&super::view_residuals(&sol.camera, p, v, &object)))
+            .map(|(v, p)| super::rms(&super::view_residuals(&sol.camera, p, v, object)))
             .collect();
         let med = crate::stats::median(&errs);
         let suspicious: Vec<usize> = usable
             .iter()
             .zip(&errs)
-            .filter(|(&i, &e)| e > (1.5 * med).max(med + 0.1) && found[i][1].is_none())
+            .filter(|(&i, &e)| e > (1.5 * med).max(med + 0.1) && f.found[i][1].is_none())
             .map(|(&i, _)| i)
             .collect();
-        run_pass(Detector::SectorBased, &suspicious, &mut found, &mut errors);
+        f.pass(
+            Detector::SectorBased,
+            &suspicious,
+            opts,
+            detect,
+            images,
+            pattern,
+        );
     }
-    let detection_s = t0.elapsed().as_secs_f64();
-    let t1 = std::time::Instant::now();
-    let runs = |d: Detector| found.iter().filter(|f| f[d as usize].is_some()).count();
-    let detector_note = format!(
-        "detectors: classic run on {} image(s), sector-based on {}",
-        runs(Detector::Classic),
-        runs(Detector::SectorBased)
-    );
-    let mut candidates: Vec<(String, [Corners; 2])> = vec![];
-    for (i, (f, _, _)) in images.iter().enumerate() {
+    Ok(f)
+}
+
+/// The images with corners by either detector; the others join `images.unusable`, with why.
+fn candidates(images: &mut Images, f: &Found2, pattern: Pattern) -> Vec<(String, [Corners; 2])> {
+    let mut candidates = vec![];
+    for (i, (name, _, _)) in images.list.iter().enumerate() {
         let both = [
-            corners_of(&found[i], Detector::Classic),
-            corners_of(&found[i], Detector::SectorBased),
+            f.corners(i, Detector::Classic),
+            f.corners(i, Detector::SectorBased),
         ];
-        match (&errors[i], &both) {
-            (Some(e), [None, None]) => {
-                unusable.push((f.clone(), format!("detection failed: {}", one_line(e))))
-            }
-            (_, [None, None]) => {
-                unusable.push((f.clone(), format!("no {pattern} chessboard found")))
-            }
-            _ => candidates.push((f.clone(), both)),
+        match (&f.errors[i], &both) {
+            (Some(e), [None, None]) => images
+                .unusable
+                .push((name.clone(), format!("detection failed: {}", one_line(e)))),
+            (_, [None, None]) => images
+                .unusable
+                .push((name.clone(), format!("no {pattern} chessboard found"))),
+            _ => candidates.push((name.clone(), both)),
         }
     }
-    if candidates.len() < 3 {
-        return Err(no_view(&opts.dir, images_read, &unusable));
-    }
+    candidates
+}
+
+/// Per view, the detector whose corners an initial camera (from the first detector's corners
+/// of every view) explains better.
+fn choose_views(
+    backend: &dyn Backend,
+    candidates: Vec<(String, [Corners; 2])>,
+    object: &[nalgebra::Vector3<f64>],
+    size: [u32; 2],
+) -> Result<Vec<View>> {
     let first: Vec<&[Vector2<f64>]> = candidates
         .iter()
         .map(|(_, b)| b[0].as_deref().or(b[1].as_deref()).unwrap_or(&[]))
         .collect();
-    let initial = backend.calibrate(&first, &object, size, super::DistortionModel::K1K2P1P2)?;
-    // Keep, per view, the detector whose corners the initial camera explains better.
+    let initial = backend.calibrate(&first, object, size, super::DistortionModel::K1K2P1P2)?;
     let mut views = vec![];
     for (f, both) in candidates {
         let mut best: Option<(f64, Vec<Vector2<f64>>, &'static str)> = None;
         for (k, c) in both.into_iter().enumerate() {
             let Some(c) = c else { continue };
-            let e = match backend.pose(&initial.camera, &c, &object) {
-                Ok(pose) => super::rms(&super::view_residuals(&initial.camera, &pose, &c, &object)),
+            let e = match backend.pose(&initial.camera, &c, object) {
+                Ok(pose) => super::rms(&super::view_residuals(&initial.camera, &pose, &c, object)),
                 Err(_) => f64::INFINITY,
             };
             if best.as_ref().is_none_or(|b| e < b.0) {
@@ -289,33 +429,28 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             });
         }
     }
-    let mut cal = calibrate(backend, views, &object, size)?;
-    cal.notes.insert(0, detector_note);
-    for (f, why) in &unusable {
-        cal.reports.push(ViewReport {
-            file: f.clone(),
-            rms_px: None,
-            status: why.clone(),
-        });
-    }
-    cal.reports.sort_by(|a, b| a.file.cmp(&b.file));
-    let exif_notes = exif_checks(
-        &images
-            .iter()
-            .map(|(f, _, e)| (f.clone(), e.clone()))
-            .collect::<Vec<_>>(),
-        cal.camera.fx,
-        size,
-    );
-    cal.warnings.extend(
-        exif_notes
-            .iter()
-            .filter(|n| n.starts_with("warning: "))
-            .map(|n| n[9..].to_string()),
-    );
-    let calibration_s = t1.elapsed().as_secs_f64();
+    Ok(views)
+}
 
-    // Outputs.
+/// The files a calibration wrote.
+struct Written {
+    intrinsics_file: PathBuf,
+    yaml_file: PathBuf,
+    exports: Vec<(PathBuf, String)>,
+    plot_files: Vec<PathBuf>,
+}
+
+/// intrinsics.json, the OpenCV YAML, the exports asked for and the figures, as one set.
+fn write_outputs(
+    opts: &Options,
+    detect: &dyn Detect,
+    cal: &Calibration,
+    pattern: Pattern,
+    object: &[nalgebra::Vector3<f64>],
+    images: &Images,
+    exif_notes: &[String],
+) -> Result<Written> {
+    let size = images.size;
     let intrinsics_file = opts
         .out
         .clone()
@@ -351,10 +486,36 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
             "notes": cal.notes,
             "warnings": cal.warnings,
             "exif": exif_notes,
-            "images_read": images_read,
+            "images_read": images.read,
         })),
     };
-    // The other tools' formats, in the same folder.
+    let exports = exports(opts, c, &out_dir);
+    // One set: the YAML, the exports and the plots, then intrinsics.json (what the reuse check
+    // trusts) last.
+    let mut members: Vec<&Path> = vec![&intrinsics_file, &yaml_file, &plot_dir];
+    members.extend(exports.iter().map(|(p, _, _)| p.as_path()));
+    let set = crate::formats::output::OutputSet::begin(&members);
+    crate::formats::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
+    for (path, text, _) in &exports {
+        crate::formats::output::write_bytes(path, text.as_bytes())?;
+    }
+    let plot_files = super::plots::write_all(cal, object, size, &plot_dir)?;
+    crate::formats::output::write_json(&intrinsics_file, &file)?;
+    set.commit()?;
+    Ok(Written {
+        intrinsics_file,
+        yaml_file,
+        exports: exports.into_iter().map(|(p, _, n)| (p, n)).collect(),
+        plot_files,
+    })
+}
+
+/// The other tools' camera files asked for (path, text, a note on each), in `out_dir`.
+fn exports(
+    opts: &Options,
+    c: &crate::camera::Camera,
+    out_dir: &Path,
+) -> Vec<(PathBuf, String, String)> {
     use crate::formats::camera_export::{self as export, ExportFormat};
     let mut exports: Vec<(PathBuf, String, String)> = vec![];
     for f in [ExportFormat::Ros, ExportFormat::Colmap] {
@@ -377,31 +538,7 @@ pub fn run(opts: &Options, detect: &dyn Detect, backend: &dyn Backend) -> Result
         };
         exports.push((path, text, note));
     }
-    // One set: the YAML, the exports and the plots, then intrinsics.json (what the reuse check
-    // trusts) last.
-    let mut members: Vec<&Path> = vec![&intrinsics_file, &yaml_file, &plot_dir];
-    members.extend(exports.iter().map(|(p, _, _)| p.as_path()));
-    let set = crate::formats::output::OutputSet::begin(&members);
-    crate::formats::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
-    for (path, text, _) in &exports {
-        crate::formats::output::write_bytes(path, text.as_bytes())?;
-    }
-    let plot_files = super::plots::write_all(&cal, &object, size, &plot_dir)?;
-    crate::formats::output::write_json(&intrinsics_file, &file)?;
-    set.commit()?;
-    Ok(Report {
-        calibration: cal,
-        pattern,
-        images_read,
-        unusable,
-        exif_notes,
-        intrinsics_file,
-        yaml_file,
-        exports: exports.into_iter().map(|(p, _, n)| (p, n)).collect(),
-        plot_files,
-        detection_s,
-        calibration_s,
-    })
+    exports
 }
 
 fn no_view(dir: &Path, read: usize, why: &[(String, String)]) -> Error {
