@@ -1,30 +1,49 @@
 //! The one-screen human summary of a fit.
 
 use crate::formats::fit::*;
+use std::fmt::Write;
 
-/// The one-screen human summary of a fit.
+/// The one-screen human summary of a fit: the method, the material, the light, the model's
+/// extensions and the baseline, how well it fits, the solver, what was skipped, the notes, the
+/// time.
 pub fn summary(f: &FitFile) -> String {
-    use std::fmt::Write;
+    [
+        material(f),
+        light(f),
+        extensions(f),
+        quality(f),
+        solver(f),
+        time(f),
+    ]
+    .concat()
+}
+
+/// A parameter's status as fit.json gives it.
+fn status(f: &FitFile, name: &str) -> String {
+    f.parameters
+        .iter()
+        .find(|p| p.name == name)
+        .map(|p| p.status.clone())
+        .unwrap_or_default()
+}
+
+/// Three channels' values with their errors, to `digits` decimals.
+fn rgb(v: &[f64; 3], e: &[f64; 3], digits: usize) -> String {
+    format!(
+        "{:.d$} ± {:.d$}, {:.d$} ± {:.d$}, {:.d$} ± {:.d$}",
+        v[0],
+        e[0],
+        v[1],
+        e[1],
+        v[2],
+        e[2],
+        d = digits
+    )
+}
+
+/// The method, σ0, the albedo, η and the lobe.
+fn material(f: &FitFile) -> String {
     let mut s = String::new();
-    let status = |name: &str| {
-        f.parameters
-            .iter()
-            .find(|p| p.name == name)
-            .map(|p| p.status.clone())
-            .unwrap_or_default()
-    };
-    let rgb = |v: &[f64; 3], e: &[f64; 3], digits: usize| {
-        format!(
-            "{:.d$} ± {:.d$}, {:.d$} ± {:.d$}, {:.d$} ± {:.d$}",
-            v[0],
-            e[0],
-            v[1],
-            e[1],
-            v[2],
-            e[2],
-            d = digits
-        )
-    };
     let _ = writeln!(
         s,
         "method   {} ({} camera), session {}",
@@ -46,7 +65,7 @@ pub fn summary(f: &FitFile) -> String {
         "eta      {:.4} ± {:.4}  [{}]",
         f.eta,
         f.std.eta,
-        status("eta")
+        status(f, "eta")
     );
     match (&f.specular, &f.std.specular) {
         (Some(sp), Some(e)) => {
@@ -55,16 +74,22 @@ pub fn summary(f: &FitFile) -> String {
                 "specular ks {:.4} ± {:.4} [{}], alpha {:.4} ± {:.4} [{}]",
                 sp.ks,
                 e.ks,
-                status("ks"),
+                status(f, "ks"),
                 sp.alpha,
                 e.alpha,
-                status("alpha")
+                status(f, "alpha")
             );
         }
         _ => {
-            let _ = writeln!(s, "specular none  [{}]", status("ks"));
+            let _ = writeln!(s, "specular none  [{}]", status(f, "ks"));
         }
     }
+    s
+}
+
+/// The light, how far it moved from the detector's, and each photo's.
+fn light(f: &FitFile) -> String {
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "light    [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°) ± {:.3}°  [{}]",
@@ -74,7 +99,7 @@ pub fn summary(f: &FitFile) -> String {
         f.light_azimuth_deg,
         f.light_elevation_deg,
         f.std.light_deg,
-        status("light_azimuth")
+        status(f, "light_azimuth")
     );
     if let Some(lp) = &f.light_pull {
         let _ = writeln!(
@@ -95,6 +120,12 @@ pub fn summary(f: &FitFile) -> String {
             il.elevation_deg
         );
     }
+    s
+}
+
+/// The model's extensions, the per-radius fits and the paper's baseline.
+fn extensions(f: &FitFile) -> String {
+    let mut s = String::new();
     if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
         let _ = writeln!(
             s,
@@ -138,6 +169,12 @@ pub fn summary(f: &FitFile) -> String {
             b.sigma0_mm[0], b.sigma0_mm[1], b.sigma0_mm[2], b.eta, b.seconds
         );
     }
+    s
+}
+
+/// The residuals, each sphere's prediction, the jackknife's and the holdout's.
+fn quality(f: &FitFile) -> String {
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "rmse     {:.3e} ({:.2}% of the data's RMS){}",
@@ -186,6 +223,12 @@ pub fn summary(f: &FitFile) -> String {
             100.0 * h.unlit_rel_rmse
         );
     }
+    s
+}
+
+/// The solver's convergence, what was skipped and the notes.
+fn solver(f: &FitFile) -> String {
+    let mut s = String::new();
     let c = &f.convergence;
     let evals: usize = c.stages.iter().map(|st| st.evaluations).sum();
     let _ = writeln!(
@@ -213,6 +256,12 @@ pub fn summary(f: &FitFile) -> String {
     for n in &f.notes {
         let _ = writeln!(s, "note     {n}");
     }
+    s
+}
+
+/// Where the time went.
+fn time(f: &FitFile) -> String {
+    let mut s = String::new();
     let t = &f.timings;
     let _ = writeln!(
         s,
