@@ -19,7 +19,7 @@ use crate::camera::outline::{Outline, Projection};
 use crate::camera::sphere::EllipseJson;
 use crate::error::{Error, Result};
 use crate::formats::photo::{load_linear_rgb, LinearRgb};
-use crate::formats::session::{self, LightMode, Session};
+use crate::formats::session::{self, LightMode, Session, SessionReport};
 use crate::model::LightAngles;
 use found::locate_highlights;
 pub use found::{Found, Silhouette};
@@ -170,21 +170,11 @@ pub fn luminance(img: &LinearRgb) -> Plane {
     }
 }
 
-/// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
-/// session). `lum` is the photo's [`luminance`].
-pub(crate) fn find_spheres(
-    img: &LinearRgb,
-    lum: &Plane,
-    proj: &Projection,
-    spheres: &[crate::formats::session::SessionSphere],
-    path: &Path,
-) -> Result<Vec<Silhouette>> {
-    let radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
-    let hints: Option<Vec<([f64; 2], f64)>> = spheres.iter().map(|s| s.hint()).collect();
-    let backdrop = Backdrop::of(lum);
-    let noise = backdrop.noise;
+/// The photo's pixels that stand out of the backdrop: each pixel's excess over the backdrop
+/// under it, the mask of those above the threshold (8 noise σ, or 3% of the 99.9th percentile
+/// of the excess), and the threshold.
+fn excess_mask(lum: &Plane, backdrop: &Backdrop) -> (Vec<f32>, Vec<bool>, f64) {
     let w = lum.width as usize;
-    // Each pixel's excess over the backdrop under it.
     let excess: Vec<f32> = lum
         .data
         .iter()
@@ -198,66 +188,96 @@ pub(crate) fn find_spheres(
         .collect();
     top.sort_by(|a, b| a.total_cmp(b));
     let p999 = top[((top.len() as f64 * 0.999) as usize).min(top.len() - 1)] as f64;
-    let thr = (8.0 * noise).max(0.03 * p999);
+    let thr = (8.0 * backdrop.noise).max(0.03 * p999);
     let mask: Vec<bool> = excess.iter().map(|&v| v as f64 > thr).collect();
-    let mut found: Vec<_> = match &hints {
-        // Where the user said to look: a disc of the hinted size, searched in its own box.
-        Some(h) => {
-            let mut v = vec![];
-            for &(c, r) in h {
-                if !(c[0] >= 0.0
-                    && c[1] >= 0.0
-                    && c[0] < img.width as f64
-                    && c[1] < img.height as f64)
-                {
-                    return Err(Error::invalid(
-                        path,
-                        format!(
-                            "center_px ({:.0}, {:.0}) lies outside the {}×{} photo",
-                            c[0], c[1], img.width, img.height
-                        ),
-                    ));
-                }
-                let clamp = |v: f64, hi: u32| v.clamp(0.0, (hi - 1) as f64) as u32;
-                v.push(crate::detect::silhouette::Blob {
-                    area: (std::f64::consts::PI * r * r) as usize,
-                    centroid: Vector2::new(c[0], c[1]),
-                    bbox: [
-                        clamp(c[0] - r, img.width),
-                        clamp(c[1] - r, img.height),
-                        clamp(c[0] + r, img.width),
-                        clamp(c[1] + r, img.height),
-                    ],
-                    extent: r,
-                    mass: std::f64::consts::PI * r * r,
-                });
-            }
-            v
+    (excess, mask, thr)
+}
+
+/// Where the user said to look: a disc of the hinted size per sphere, searched in its own box.
+fn hinted_blobs(
+    img: &LinearRgb,
+    hints: &[([f64; 2], f64)],
+    path: &Path,
+) -> Result<Vec<crate::detect::silhouette::Blob>> {
+    let mut v = vec![];
+    for &(c, r) in hints {
+        if !(c[0] >= 0.0 && c[1] >= 0.0 && c[0] < img.width as f64 && c[1] < img.height as f64) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "center_px ({:.0}, {:.0}) lies outside the {}×{} photo",
+                    c[0], c[1], img.width, img.height
+                ),
+            ));
         }
-        None => {
-            let all = blobs(&mask, img.width, img.height, Some(&excess));
-            let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
-            all.into_iter()
-                // A sphere stands well out of the backdrop; a patch of backdrop the surface does
-                // not follow (a table's edge against the wall) only just crosses the threshold.
-                .filter(|b| {
-                    b.mass >= 0.05 * biggest && b.area >= 30 && b.mass >= 4.0 * thr * b.area as f64
-                })
-                .collect()
-        }
-    };
-    // More blobs than spheres: the least disc-like go (a pin or stand under a sphere, a cable) —
-    // a disc fills π·extent² about its centroid, a pin a few percent of it. Only past 30%: a lit
-    // crescent of a back-lit sphere fills less than a disc, and is still a sphere.
-    if found.len() > radii.len() {
+        let clamp = |v: f64, hi: u32| v.clamp(0.0, (hi - 1) as f64) as u32;
+        v.push(crate::detect::silhouette::Blob {
+            area: (std::f64::consts::PI * r * r) as usize,
+            centroid: Vector2::new(c[0], c[1]),
+            bbox: [
+                clamp(c[0] - r, img.width),
+                clamp(c[1] - r, img.height),
+                clamp(c[0] + r, img.width),
+                clamp(c[1] + r, img.height),
+            ],
+            extent: r,
+            mass: std::f64::consts::PI * r * r,
+        });
+    }
+    Ok(v)
+}
+
+/// The blobs of the mask that can be spheres: a sphere stands well out of the backdrop; a patch
+/// of backdrop the surface does not follow (a table's edge against the wall) only just crosses
+/// the threshold.
+fn sphere_blobs(
+    img: &LinearRgb,
+    mask: &[bool],
+    excess: &[f32],
+    thr: f64,
+) -> Vec<crate::detect::silhouette::Blob> {
+    let all = blobs(mask, img.width, img.height, Some(excess));
+    let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
+    all.into_iter()
+        .filter(|b| b.mass >= 0.05 * biggest && b.area >= 30 && b.mass >= 4.0 * thr * b.area as f64)
+        .collect()
+}
+
+/// More blobs than spheres: the least disc-like go (a pin or stand under a sphere, a cable) — a
+/// disc fills π·extent² about its centroid, a pin a few percent of it. Only past 30%: a lit
+/// crescent of a back-lit sphere fills less than a disc, and is still a sphere.
+fn drop_least_disclike(found: &mut Vec<crate::detect::silhouette::Blob>, spheres: usize) {
+    if found.len() > spheres {
         let fill = |b: &crate::detect::silhouette::Blob| {
             b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0)
         };
         found.sort_by(|a, b| fill(b).total_cmp(&fill(a)));
-        while found.len() > radii.len() && found.last().is_some_and(|b| fill(b) < 0.3) {
+        while found.len() > spheres && found.last().is_some_and(|b| fill(b) < 0.3) {
             found.pop();
         }
     }
+}
+
+/// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
+/// session). `lum` is the photo's [`luminance`]. The steps: the pixels above the backdrop, the
+/// blobs (or the hinted discs), as many as the session lists and none cut by the frame, then each
+/// one's silhouette.
+pub(crate) fn find_spheres(
+    img: &LinearRgb,
+    lum: &Plane,
+    proj: &Projection,
+    spheres: &[crate::formats::session::SessionSphere],
+    path: &Path,
+) -> Result<Vec<Silhouette>> {
+    let radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    let hints: Option<Vec<([f64; 2], f64)>> = spheres.iter().map(|s| s.hint()).collect();
+    let backdrop = Backdrop::of(lum);
+    let (excess, mask, thr) = excess_mask(lum, &backdrop);
+    let mut found = match &hints {
+        Some(h) => hinted_blobs(img, h, path)?,
+        None => sphere_blobs(img, &mask, &excess, thr),
+    };
+    drop_least_disclike(&mut found, radii.len());
     if found.len() != radii.len() {
         return Err(Error::invalid(
             path,
@@ -284,9 +304,58 @@ pub(crate) fn find_spheres(
     if hints.is_none() {
         found.sort_by(|a, b| a.centroid.x.total_cmp(&b.centroid.x));
     }
-    let mut out = vec![];
-    for (b, &radius_mm) in found.iter().zip(&radii) {
-        let pad = if hints.is_some() {
+    let photo = Photo {
+        img,
+        lum,
+        proj,
+        mask: &mask,
+        excess: &excess,
+        noise: backdrop.noise,
+        hinted: hints.is_some(),
+        path,
+    };
+    found
+        .iter()
+        .zip(&radii)
+        .enumerate()
+        .map(|(k, (b, &radius_mm))| photo.silhouette(b, radius_mm, (k, radii.len())))
+        .collect()
+}
+
+/// One photo as the silhouette search sees it.
+struct Photo<'a> {
+    img: &'a LinearRgb,
+    lum: &'a Plane,
+    proj: &'a Projection,
+    mask: &'a [bool],
+    excess: &'a [f32],
+    /// The backdrop's noise.
+    noise: f64,
+    /// The spheres are where session.json's hints say.
+    hinted: bool,
+    path: &'a Path,
+}
+
+impl Photo<'_> {
+    /// The silhouette of the sphere in blob `b`: edges around it above a threshold from the
+    /// noise and the sphere's level, a RANSAC outline among them, refined on the edge model
+    /// (kept when it stays within 5% of the radius). `which`: its place and the sphere count.
+    fn silhouette(
+        &self,
+        b: &crate::detect::silhouette::Blob,
+        radius_mm: f64,
+        which: (usize, usize),
+    ) -> Result<Silhouette> {
+        let (img, lum, proj, mask, excess, noise, path) = (
+            self.img,
+            self.lum,
+            self.proj,
+            self.mask,
+            self.excess,
+            self.noise,
+            self.path,
+        );
+        let pad = if self.hinted {
             (0.4 * b.extent).ceil() as u32 + 4
         } else {
             b.extent.ceil() as u32 + 4
@@ -332,7 +401,7 @@ pub(crate) fn find_spheres(
         let threshold = (5.0 * noise).max(2.5 * inner_noise).max(0.03 * level);
         let mut edges = silhouette::edge_points(lum, region, threshold, proj);
         // With a hint, only edges near the hinted rim: a close neighbour's are not this sphere's.
-        let range = if hints.is_some() {
+        let range = if self.hinted {
             edges.retain(|e| {
                 let d = (e.px - b.centroid).norm();
                 d > 0.6 * b.extent && d < 1.4 * b.extent
@@ -351,8 +420,8 @@ pub(crate) fn find_spheres(
                 path,
                 format!(
                     "sphere {} of {} (r = {radius_mm} mm, near pixel ({:.0}, {:.0})): {what}",
-                    out.len() + 1,
-                    radii.len(),
+                    which.0 + 1,
+                    which.1,
                     b.centroid.x,
                     b.centroid.y
                 ),
@@ -378,7 +447,7 @@ pub(crate) fn find_spheres(
         } else {
             fit.outline
         };
-        out.push(Silhouette {
+        Ok(Silhouette {
             radius_mm,
             outline,
             std_px: refined.std_px,
@@ -387,9 +456,8 @@ pub(crate) fn find_spheres(
             noise: noise.max(1e-6),
             edge_points: edges.len(),
             inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
-        });
+        })
     }
-    Ok(out)
 }
 
 /// Spheres that stayed put across the photos (same radii in every photo, outlines within 2 px):
@@ -466,6 +534,166 @@ pub struct Options {
     pub quiet: bool,
 }
 
+/// The lights the highlights give: each photo's combined, and the session's (one light for
+/// all), with which estimates each combination set aside as outliers.
+struct Lights {
+    image: Vec<Option<highlight::Combined>>,
+    /// Every (photo, sphere) with a highlight, in order: the session combination's inputs.
+    all: Vec<(usize, usize)>,
+    session: Option<highlight::Combined>,
+    mode: LightMode,
+}
+
+fn estimate(f: &Found) -> Option<&highlight::Highlight> {
+    f.highlight.as_ref().ok()
+}
+
+impl Lights {
+    fn of(per_image: &[(LinearRgb, Vec<Found>)], mode: LightMode) -> Lights {
+        let image: Vec<Option<highlight::Combined>> = per_image
+            .iter()
+            .map(|(_, fs)| {
+                let e: Vec<_> = fs.iter().filter_map(estimate).collect();
+                highlight::combine_highlights(&e, LIGHT_FLOOR)
+            })
+            .collect();
+        let all: Vec<(usize, usize)> = per_image
+            .iter()
+            .enumerate()
+            .flat_map(|(i, (_, fs))| {
+                fs.iter()
+                    .enumerate()
+                    .filter(|(_, f)| f.highlight.is_ok())
+                    .map(move |(j, _)| (i, j))
+            })
+            .collect();
+        let session = match mode {
+            LightMode::Shared => {
+                let e: Vec<_> = all
+                    .iter()
+                    .filter_map(|&(i, j)| estimate(&per_image[i].1[j]))
+                    .collect();
+                highlight::combine_highlights(&e, LIGHT_FLOOR)
+            }
+            LightMode::PerImage => None,
+        };
+        Lights {
+            image,
+            all,
+            session,
+            mode,
+        }
+    }
+
+    /// Whether sphere `j` of photo `i` (`found`: that photo's) was set aside.
+    fn outlier(&self, i: usize, j: usize, found: &[Found]) -> bool {
+        match (&self.session, self.mode) {
+            (Some(c), LightMode::Shared) => self
+                .all
+                .iter()
+                .position(|&p| p == (i, j))
+                .is_some_and(|k| c.outlier[k]),
+            _ => {
+                let k = found[..j].iter().filter(|f| f.highlight.is_ok()).count();
+                self.image[i].as_ref().is_some_and(|c| c.outlier[k])
+            }
+        }
+    }
+
+    /// The light the samples of photo `i` are flagged against.
+    fn for_photo(&self, i: usize) -> Option<Vector3<f64>> {
+        match self.mode {
+            LightMode::Shared => self.session.as_ref().map(|c| c.light),
+            LightMode::PerImage => self.image[i].as_ref().map(|c| c.light),
+        }
+    }
+}
+
+/// Each photo decoded, its spheres found, and the outlines of spheres that stayed put refitted
+/// over all photos.
+fn outlines(
+    report: &SessionReport,
+    sess: &Session,
+    proj: &Projection,
+    quiet: bool,
+) -> Result<Vec<(LinearRgb, Plane, Vec<Silhouette>)>> {
+    let pb = crate::progress::bar(report.images.len() as u64, "detect", quiet);
+    let per_image: Vec<Result<(LinearRgb, Plane, Vec<Silhouette>)>> = report
+        .images
+        .par_iter()
+        .zip(&sess.images)
+        .map(|(info, si)| {
+            let img = load_linear_rgb(&info.path, si.linear)?;
+            let lum = luminance(&img);
+            let f = find_spheres(&img, &lum, proj, &si.spheres, &info.path)?;
+            pb.inc(1);
+            Ok((img, lum, f))
+        })
+        .collect();
+    pb.finish_and_clear();
+    let mut per_image: Vec<(LinearRgb, Plane, Vec<Silhouette>)> =
+        per_image.into_iter().collect::<Result<_>>()?;
+    pool_static_spheres(&mut per_image, proj);
+    Ok(per_image)
+}
+
+/// One sphere's record: its outline, highlight and light, and its samples' counts.
+fn sphere_detection(
+    f: &Found,
+    img: &LinearRgb,
+    exposure: f64,
+    proj: &Projection,
+    light: Option<&Vector3<f64>>,
+    outlier: bool,
+) -> SphereDetection {
+    let hl = f.highlight.as_ref().ok();
+    let smp = samples::sphere_samples(
+        img,
+        exposure,
+        proj,
+        &f.silhouette.outline,
+        f.silhouette.radius_mm,
+        light,
+        hl.map(|h| h.radius),
+    );
+    SphereDetection {
+        radius_mm: f.silhouette.radius_mm,
+        ellipse: f
+            .silhouette
+            .outline
+            .ellipse(proj)
+            .map(EllipseJson::from)
+            .unwrap_or(EllipseJson {
+                center_px: [f64::NAN; 2],
+                axes_px: [f64::NAN; 2],
+                angle_deg: f64::NAN,
+            }),
+        center_mm: f
+            .silhouette
+            .outline
+            .center_mm(f.silhouette.radius_mm)
+            .map(|c| arr3(&c)),
+        outline: OutlineJson::from(&f.silhouette.outline),
+        silhouette_std_px: f.silhouette.std_px,
+        silhouette_blur_px: f.silhouette.blur_px,
+        silhouette_photos: f.silhouette.photos,
+        edge_points: f.silhouette.edge_points,
+        edge_inliers: f.silhouette.inlier_px.len(),
+        highlight_px: hl.map(|h| [h.px.x, h.px.y]),
+        light_direction: hl.map(|h| arr3(&h.light)),
+        light_std_deg: hl.map(|h| h.std().to_degrees()),
+        highlight: hl.map(|h| HighlightJson {
+            method: h.method,
+            alpha: h.alpha,
+            saturated_px: h.saturated,
+            radius_deg: h.radius.to_degrees(),
+            outlier,
+        }),
+        no_highlight: f.highlight.as_ref().err().cloned(),
+        samples: samples::counts(&smp),
+    }
+}
+
 /// Run detection over a session.
 pub fn run(opts: &Options) -> Result<Detections> {
     let t0 = std::time::Instant::now();
@@ -479,23 +707,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
         .out
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
-    let pb = crate::progress::bar(report.images.len() as u64, "detect", opts.quiet);
-    let per_image: Vec<Result<(LinearRgb, Plane, Vec<Silhouette>)>> = report
-        .images
-        .par_iter()
-        .zip(&sess.images)
-        .map(|(info, si)| {
-            let img = load_linear_rgb(&info.path, si.linear)?;
-            let lum = luminance(&img);
-            let f = find_spheres(&img, &lum, &proj, &si.spheres, &info.path)?;
-            pb.inc(1);
-            Ok((img, lum, f))
-        })
-        .collect();
-    pb.finish_and_clear();
-    let mut per_image: Vec<(LinearRgb, Plane, Vec<Silhouette>)> =
-        per_image.into_iter().collect::<Result<_>>()?;
-    pool_static_spheres(&mut per_image, &proj);
+    let per_image = outlines(&report, &sess, &proj, opts.quiet)?;
     // Highlights once the outlines are final.
     let per_image: Vec<(LinearRgb, Vec<Found>)> = per_image
         .into_par_iter()
@@ -504,112 +716,21 @@ pub fn run(opts: &Options) -> Result<Detections> {
             (img, found)
         })
         .collect();
-    // Lights: per photo, then over the session.
-    fn est(f: &Found) -> Option<&highlight::Highlight> {
-        f.highlight.as_ref().ok()
-    }
-    let image_lights: Vec<Option<highlight::Combined>> = per_image
-        .iter()
-        .map(|(_, fs)| {
-            let e: Vec<_> = fs.iter().filter_map(est).collect();
-            highlight::combine_highlights(&e, LIGHT_FLOOR)
-        })
-        .collect();
-    let all: Vec<(usize, usize)> = per_image
-        .iter()
-        .enumerate()
-        .flat_map(|(i, (_, fs))| {
-            fs.iter()
-                .enumerate()
-                .filter(|(_, f)| f.highlight.is_ok())
-                .map(move |(j, _)| (i, j))
-        })
-        .collect();
-    let session_light = match sess.light {
-        LightMode::Shared => {
-            let e: Vec<_> = all
-                .iter()
-                .filter_map(|&(i, j)| est(&per_image[i].1[j]))
-                .collect();
-            highlight::combine_highlights(&e, LIGHT_FLOOR)
-        }
-        LightMode::PerImage => None,
-    };
-    let is_outlier = |i: usize, j: usize| -> bool {
-        match (&session_light, sess.light) {
-            (Some(c), LightMode::Shared) => all
-                .iter()
-                .position(|&p| p == (i, j))
-                .is_some_and(|k| c.outlier[k]),
-            _ => {
-                let k = per_image[i].1[..j]
-                    .iter()
-                    .filter(|f| f.highlight.is_ok())
-                    .count();
-                image_lights[i].as_ref().is_some_and(|c| c.outlier[k])
-            }
-        }
-    };
+    let lights = Lights::of(&per_image, sess.light);
     let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
     // One set: the overlays, then detections.json (what the reuse check trusts) last.
     let overlay_dir = out_dir.join("overlays");
     let set = crate::formats::output::OutputSet::begin(&[&out, &overlay_dir]);
     let mut images = vec![];
     for (i, ((img, fs), info)) in per_image.iter().zip(&report.images).enumerate() {
-        let light_for_samples = match sess.light {
-            LightMode::Shared => session_light.as_ref().map(|c| c.light),
-            LightMode::PerImage => image_lights[i].as_ref().map(|c| c.light),
-        };
+        let light = lights.for_photo(i);
         let spheres = fs
             .iter()
             .enumerate()
             .map(|(j, f)| {
-                let hl = f.highlight.as_ref().ok();
-                let smp = samples::sphere_samples(
-                    img,
-                    info.exposure.unwrap_or(1.0),
-                    &proj,
-                    &f.silhouette.outline,
-                    f.silhouette.radius_mm,
-                    light_for_samples.as_ref(),
-                    hl.map(|h| h.radius),
-                );
-                SphereDetection {
-                    radius_mm: f.silhouette.radius_mm,
-                    ellipse: f
-                        .silhouette
-                        .outline
-                        .ellipse(&proj)
-                        .map(EllipseJson::from)
-                        .unwrap_or(EllipseJson {
-                            center_px: [f64::NAN; 2],
-                            axes_px: [f64::NAN; 2],
-                            angle_deg: f64::NAN,
-                        }),
-                    center_mm: f
-                        .silhouette
-                        .outline
-                        .center_mm(f.silhouette.radius_mm)
-                        .map(|c| arr3(&c)),
-                    outline: OutlineJson::from(&f.silhouette.outline),
-                    silhouette_std_px: f.silhouette.std_px,
-                    silhouette_blur_px: f.silhouette.blur_px,
-                    silhouette_photos: f.silhouette.photos,
-                    edge_points: f.silhouette.edge_points,
-                    edge_inliers: f.silhouette.inlier_px.len(),
-                    highlight_px: hl.map(|h| [h.px.x, h.px.y]),
-                    light_direction: hl.map(|h| arr3(&h.light)),
-                    light_std_deg: hl.map(|h| h.std().to_degrees()),
-                    highlight: hl.map(|h| HighlightJson {
-                        method: h.method,
-                        alpha: h.alpha,
-                        saturated_px: h.saturated,
-                        radius_deg: h.radius.to_degrees(),
-                        outlier: is_outlier(i, j),
-                    }),
-                    no_highlight: f.highlight.as_ref().err().cloned(),
-                    samples: samples::counts(&smp),
-                }
+                let outlier = lights.outlier(i, j, fs);
+                let exposure = info.exposure.unwrap_or(1.0);
+                sphere_detection(f, img, exposure, &proj, light.as_ref(), outlier)
             })
             .collect();
         let overlay = if opts.overlays {
@@ -618,13 +739,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| format!("image{i}"));
             let rel = format!("overlays/{stem}.png");
-            crate::detect::overlay::write(
-                &out_dir.join(&rel),
-                img,
-                &proj,
-                fs,
-                light_for_samples.as_ref(),
-            )?;
+            crate::detect::overlay::write(&out_dir.join(&rel), img, &proj, fs, light.as_ref())?;
             Some(rel)
         } else {
             None
@@ -635,12 +750,13 @@ pub fn run(opts: &Options) -> Result<Detections> {
             height: img.height,
             exposure: info.exposure,
             exif_notes: info.exif_notes.clone(),
-            light_direction: image_lights[i].as_ref().map(|c| arr3(&c.light)),
-            light_std_deg: image_lights[i].as_ref().map(|c| c.std().to_degrees()),
+            light_direction: lights.image[i].as_ref().map(|c| arr3(&c.light)),
+            light_std_deg: lights.image[i].as_ref().map(|c| c.std().to_degrees()),
             spheres,
             overlay,
         });
     }
+    let session_light = lights.session;
     let angles = session_light
         .as_ref()
         .map(|c| LightAngles::from_direction(&c.light));
