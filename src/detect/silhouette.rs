@@ -468,28 +468,21 @@ fn band_residuals(
     (res, rms)
 }
 
-/// Refine an outline with the edge model on a band `inner_px` inside to `outer_px` outside the
-/// current outline, over one or more photos of the same, unmoved sphere (`images`: luminance and
-/// pixels to leave out, e.g. saturated ones). Each photo has its own per-sector terms; the
-/// outline and the blur are shared.
-pub(crate) fn refine(
-    images: &[(&Plane, Option<&[bool]>)],
+/// One band pixel's geometry, shared by every photo: its pixel, sector, the rays of its
+/// sub-samples and its place across the sector.
+type BandGeometry = (u32, u32, usize, [Vector3<f64>; SUB * SUB], f64);
+
+/// The band `inner_px` inside to `outer_px` outside an outline, in the box `[x0, y0, x1, y1]`,
+/// split in `nsec` sectors around `center_px`.
+fn band_geometry(
     proj: &Projection,
     start: &Outline,
-    inner_px: f64,
-    outer_px: f64,
-) -> Option<Refined> {
+    [x0, y0, x1, y1]: [u32; 4],
+    center_px: Vector2<f64>,
+    nsec: usize,
+    (inner_px, outer_px): (f64, f64),
+) -> Vec<BandGeometry> {
     let r_px = start.radius_px(proj);
-    if images.is_empty() {
-        return None;
-    }
-    let (width, height) = (images[0].0.width, images[0].0.height);
-    let [x0, y0, x1, y1] = start.pixel_box(proj, outer_px + 2.0, width, height)?;
-    let center_px = proj.pixel(&start.center_point())?;
-    // Fewer sectors on small spheres: each needs 4 × NLIN band pixels for its linear terms.
-    let band_area = std::f64::consts::TAU * r_px * (inner_px + outer_px);
-    let nsec = ((band_area / (4 * NLIN) as f64) as usize).clamp(MIN_SECTORS, SECTORS);
-    // Geometry of the band, shared by all photos.
     let mut geo = vec![];
     for y in y0..=y1 {
         for x in x0..=x1 {
@@ -520,12 +513,23 @@ pub(crate) fn refine(
             geo.push((x, y, sector, qs, t - sector as f64 - 0.5));
         }
     }
+    geo
+}
+
+/// Every photo's band pixels (each photo's sectors its own), less the pixels it leaves out;
+/// `None` when the photos differ in size.
+fn band_pixels(
+    images: &[(&Plane, Option<&[bool]>)],
+    geo: &[BandGeometry],
+    nsec: usize,
+) -> Option<Vec<BandPixel>> {
+    let (width, height) = (images[0].0.width, images[0].0.height);
     let mut band = vec![];
     for (i, (img, skip)) in images.iter().enumerate() {
         if img.width != width || img.height != height {
             return None;
         }
-        for (x, y, sector, qs, dpsi) in &geo {
+        for (x, y, sector, qs, dpsi) in geo {
             if skip.is_some_and(|m| m[*y as usize * width as usize + *x as usize]) {
                 continue;
             }
@@ -537,42 +541,67 @@ pub(crate) fn refine(
             });
         }
     }
-    let sectors = images.len() * nsec;
-    if band.len() < 50 {
-        return None;
-    }
-    // Sector weights from the starting fit: 1/rms², the rms floored at the median (a sector of
-    // pure noise is not more trustworthy than the typical one).
-    let blur0 = 0.0;
-    let (_, rms0) = band_residuals(start, blur0, &band, sectors, r_px);
+    Some(band)
+}
+
+/// Sector weights from the starting fit: 1/rms², the rms floored at the median (a sector of
+/// pure noise is not more trustworthy than the typical one); 0 for a sector without its terms.
+fn sector_weights(
+    start: &Outline,
+    band: &[BandPixel],
+    sectors: usize,
+    r_px: f64,
+) -> Option<Vec<f64>> {
+    let (_, rms0) = band_residuals(start, 0.0, band, sectors, r_px);
     let mut finite: Vec<f64> = rms0.iter().cloned().filter(|v| v.is_finite()).collect();
     finite.sort_by(|a, b| a.total_cmp(b));
     let floor = finite.get(finite.len() / 2)?.max(1e-12);
-    let w: Vec<f64> = rms0
-        .iter()
-        .map(|r| {
-            if r.is_finite() {
-                1.0 / r.max(floor).powi(2)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let sectors_used = w.iter().filter(|&&v| v > 0.0).count();
-    let wpix: Vec<f64> = band.iter().map(|p| w[p.sector]).collect();
+    Some(
+        rms0.iter()
+            .map(|r| {
+                if r.is_finite() {
+                    1.0 / r.max(floor).powi(2)
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    )
+}
+
+type V4 = nalgebra::Vector4<f64>;
+type M4 = nalgebra::Matrix4<f64>;
+
+/// Where the edge model's fit ended: the parameters (the outline's three, moved from the start,
+/// and v = blur² in px²), the residuals, the weighted cost, JᵀWJ at the last point, iterations.
+struct BandFit {
+    x: V4,
+    res: Vec<f64>,
+    cost: f64,
+    jtj: M4,
+    iterations: usize,
+}
+
+/// Levenberg–Marquardt ([`crate::lm`]) of the edge model over the outline and the blur, the
+/// per-sector linear terms in closed form at each point, with a finite-difference Jacobian
+/// (one-sided at the blur's lower bound); no step moves the outline more than 2 px or the blur
+/// by more than 1 px².
+fn fit_band(
+    start: &Outline,
+    band: &[BandPixel],
+    sectors: usize,
+    (r_px, unit): (f64, f64),
+    wpix: &[f64],
+) -> BandFit {
     let cost = |r: &[f64]| -> f64 {
         r.iter()
-            .zip(&wpix)
+            .zip(wpix)
             .map(|(r, w)| if r.is_finite() { w * r * r } else { 0.0 })
             .sum()
     };
-    // Parameters: the outline's three (moved from `start`) and v = blur² (px², ≥ 0).
-    type V4 = nalgebra::Vector4<f64>;
-    type M4 = nalgebra::Matrix4<f64>;
-    let unit = start.pixel_unit(proj);
     let eval = |x: &V4| -> (Vec<f64>, f64) {
         let o = start.moved(&Vector3::new(x[0], x[1], x[2]));
-        let (r, _) = band_residuals(&o, x[3].max(0.0).sqrt(), &band, sectors, r_px);
+        let (r, _) = band_residuals(&o, x[3].max(0.0).sqrt(), band, sectors, r_px);
         let c = cost(&r);
         (r, c)
     };
@@ -640,6 +669,61 @@ pub(crate) fn refine(
             break;
         }
     }
+    BandFit {
+        x,
+        res,
+        cost: c,
+        jtj,
+        iterations,
+    }
+}
+
+/// Refine an outline with the edge model on a band `inner_px` inside to `outer_px` outside the
+/// current outline, over one or more photos of the same, unmoved sphere (`images`: luminance and
+/// pixels to leave out, e.g. saturated ones). Each photo has its own per-sector terms; the
+/// outline and the blur are shared. The steps: the band's geometry and pixels, the sectors'
+/// weights, the fit, its covariance.
+pub(crate) fn refine(
+    images: &[(&Plane, Option<&[bool]>)],
+    proj: &Projection,
+    start: &Outline,
+    inner_px: f64,
+    outer_px: f64,
+) -> Option<Refined> {
+    let r_px = start.radius_px(proj);
+    if images.is_empty() {
+        return None;
+    }
+    let (width, height) = (images[0].0.width, images[0].0.height);
+    let pixel_box = start.pixel_box(proj, outer_px + 2.0, width, height)?;
+    let center_px = proj.pixel(&start.center_point())?;
+    // Fewer sectors on small spheres: each needs 4 × NLIN band pixels for its linear terms.
+    let band_area = std::f64::consts::TAU * r_px * (inner_px + outer_px);
+    let nsec = ((band_area / (4 * NLIN) as f64) as usize).clamp(MIN_SECTORS, SECTORS);
+    let geo = band_geometry(
+        proj,
+        start,
+        pixel_box,
+        center_px,
+        nsec,
+        (inner_px, outer_px),
+    );
+    let band = band_pixels(images, &geo, nsec)?;
+    let sectors = images.len() * nsec;
+    if band.len() < 50 {
+        return None;
+    }
+    let w = sector_weights(start, &band, sectors, r_px)?;
+    let sectors_used = w.iter().filter(|&&v| v > 0.0).count();
+    let wpix: Vec<f64> = band.iter().map(|p| w[p.sector]).collect();
+    let unit = start.pixel_unit(proj);
+    let BandFit {
+        x,
+        res,
+        cost: c,
+        jtj,
+        iterations,
+    } = fit_band(start, &band, sectors, (r_px, unit), &wpix);
     let m = res.iter().filter(|r| r.is_finite()).count();
     let wsum: f64 = wpix
         .iter()

@@ -25,9 +25,9 @@ use crate::camera::outline::Projection;
 use crate::detect::samples::{self, Sample};
 use crate::error::{Error, Result};
 use crate::fit::solver::Obs;
-use crate::formats::detections::Detections;
-use crate::formats::photo::load_linear_rgb;
-use crate::formats::session::{Session, SessionReport};
+use crate::formats::detections::{Detections, SphereDetection};
+use crate::formats::photo::{load_linear_rgb, LinearRgb};
+use crate::formats::session::{ImageInfo, Session, SessionReport};
 use crate::model::Geometry;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -339,7 +339,40 @@ pub fn observe(
         .collect::<Result<_>>()?;
     let decode_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let floors: Vec<Option<[f64; 3]>> = images
+    let floors = dark_floors(report, sess, det, proj, &images);
+    let jobs = sphere_jobs(report, det)?;
+    let spheres: Vec<SphereData> = jobs
+        .par_iter()
+        .map(|&(i, j, s)| {
+            let photo = PhotoSamples {
+                img: &images[i],
+                info: &report.images[i],
+                light: lights.get(i).or(lights.first()).and_then(|l| l.as_ref()),
+                highlight_radius,
+                turn: frame.map(|f| f[i]),
+                floor: floors[i],
+            };
+            photo.sphere(proj, j, s)
+        })
+        .collect();
+    Ok(Observed {
+        spheres,
+        decode_s,
+        samples_s: t1.elapsed().as_secs_f64(),
+        floors,
+    })
+}
+
+/// Each photo's dark floor (radiance units): session.json's, else measured on the photo around
+/// the spheres' boxes; `None` where neither is there.
+fn dark_floors(
+    report: &SessionReport,
+    sess: &Session,
+    det: &Detections,
+    proj: &Projection,
+    images: &[LinearRgb],
+) -> Vec<Option<[f64; 3]>> {
+    images
         .par_iter()
         .zip(&det.images)
         .zip(&report.images)
@@ -358,7 +391,15 @@ pub fn observe(
                 .or_else(|| background(img, &boxes))
                 .map(|b| b.map(|v| v / info.exposure.unwrap_or(1.0)))
         })
-        .collect();
+        .collect()
+}
+
+/// Every (photo, sphere, detection), once the detections are checked to list the session's
+/// spheres.
+fn sphere_jobs<'a>(
+    report: &SessionReport,
+    det: &'a Detections,
+) -> Result<Vec<(usize, usize, &'a SphereDetection)>> {
     let mut jobs = vec![];
     for (i, (info, d)) in report.images.iter().zip(&det.images).enumerate() {
         if d.spheres.len() != info.radii_mm.len() {
@@ -376,132 +417,152 @@ pub fn observe(
             jobs.push((i, j, s));
         }
     }
-    let spheres: Vec<SphereData> = jobs
-        .par_iter()
-        .map(|&(i, j, s)| {
-            let info = &report.images[i];
-            let smp = samples::sphere_samples(
-                &images[i],
-                info.exposure.unwrap_or(1.0),
-                proj,
-                &s.outline.outline(),
-                s.radius_mm,
-                lights.get(i).or(lights.first()).and_then(|l| l.as_ref()),
-                highlight_radius,
-            );
-            let turn = frame.map(|f| f[i]);
-            let floor_rgb = floors[i].unwrap_or([0.0; 3]);
-            let mut smp = smp;
-            for x in smp.iter_mut() {
-                for (v, f) in x.radiance.iter_mut().zip(&floor_rgb) {
-                    *v -= f;
-                }
+    Ok(jobs)
+}
+
+/// One photo as its spheres' observations need it.
+struct PhotoSamples<'a> {
+    img: &'a LinearRgb,
+    info: &'a ImageInfo,
+    /// The light the samples are flagged against (the highlight's pixels).
+    light: Option<&'a Vector3<f64>>,
+    highlight_radius: Option<f64>,
+    /// The photo's rotation onto the common light frame (one light per photo).
+    turn: Option<nalgebra::Rotation3<f64>>,
+    floor: Option<[f64; 3]>,
+}
+
+impl PhotoSamples<'_> {
+    /// Sphere `j` of the photo (detection `s`): its samples less the dark floor, its noise model,
+    /// and the observations kept ([`PhotoSamples::keep`]).
+    fn sphere(&self, proj: &Projection, j: usize, s: &SphereDetection) -> SphereData {
+        let (img, info) = (self.img, self.info);
+        let exposure = info.exposure.unwrap_or(1.0);
+        let mut smp = samples::sphere_samples(
+            img,
+            exposure,
+            proj,
+            &s.outline.outline(),
+            s.radius_mm,
+            self.light,
+            self.highlight_radius,
+        );
+        let floor_rgb = self.floor.unwrap_or([0.0; 3]);
+        for x in smp.iter_mut() {
+            for (v, f) in x.radiance.iter_mut().zip(&floor_rgb) {
+                *v -= f;
             }
-            // The smallest σ: half a level step (a noise-free render).
-            let floor =
-                0.5 / ((1u32 << images[i].bits.min(16)) as f64) / info.exposure.unwrap_or(1.0);
-            let model = noise_model(&smp, floor);
-            let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
-            // Full scale (pixel value 1) in the samples' units.
-            let full_scale = [0, 1, 2].map(|c| 1.0 / info.exposure.unwrap_or(1.0) - floor_rgb[c]);
-            let noise = {
-                let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
-                lv.sort_by(|a, b| a.total_cmp(b));
-                let med = lv.get(lv.len() / 2).copied().unwrap_or(0.0);
-                [0, 1, 2].map(|c| sigma(c, med))
-            };
-            let mut out = SphereData {
-                image: info.file.clone(),
-                index: j,
-                radius_mm: s.radius_mm,
-                obs: vec![],
-                px: vec![],
-                pixels: smp.len(),
-                saturated: 0,
-                edge: 0,
-                impulses: 0,
-                noise,
-                noise_model: model,
-                floor: floors[i],
-                crop: s
-                    .outline
-                    .outline()
-                    .pixel_box(proj, 2.0, images[i].width, images[i].height)
-                    .map(|b| Crop::of(&images[i], b))
-                    .unwrap_or_default(),
-            };
-            for (k, x) in smp.iter().enumerate() {
-                if x.flags & samples::SATURATED != 0 {
-                    out.saturated += 1;
-                    continue;
-                }
-                if x.flags & samples::EDGE != 0 {
-                    out.edge += 1;
-                    continue;
-                }
-                // The level of the pixel's row neighbours (not its own value: a weight that
-                // depends on the pixel's own noise biases the fit toward its low values).
-                let mut level = [0.0; 3];
-                let mut n = 0.0;
-                for nb in [k.wrapping_sub(1), k + 1] {
-                    if let Some(y) = smp.get(nb) {
-                        if y.px[1] == x.px[1] && y.px[0].abs_diff(x.px[0]) == 1 {
-                            for (l, v) in level.iter_mut().zip(&y.radiance) {
-                                *l += v;
-                            }
-                            n += 1.0;
+        }
+        // The smallest σ: half a level step (a noise-free render).
+        let floor = 0.5 / ((1u32 << img.bits.min(16)) as f64) / exposure;
+        let model = noise_model(&smp, floor);
+        let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
+        // Full scale (pixel value 1) in the samples' units.
+        let full_scale = [0, 1, 2].map(|c| 1.0 / exposure - floor_rgb[c]);
+        let noise = {
+            let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
+            lv.sort_by(|a, b| a.total_cmp(b));
+            let med = lv.get(lv.len() / 2).copied().unwrap_or(0.0);
+            [0, 1, 2].map(|c| sigma(c, med))
+        };
+        let mut out = SphereData {
+            image: info.file.clone(),
+            index: j,
+            radius_mm: s.radius_mm,
+            obs: vec![],
+            px: vec![],
+            pixels: smp.len(),
+            saturated: 0,
+            edge: 0,
+            impulses: 0,
+            noise,
+            noise_model: model,
+            floor: self.floor,
+            crop: s
+                .outline
+                .outline()
+                .pixel_box(proj, 2.0, img.width, img.height)
+                .map(|b| Crop::of(img, b))
+                .unwrap_or_default(),
+        };
+        self.keep(&mut out, &smp, &sigma, full_scale);
+        out
+    }
+
+    /// The samples kept as observations, each weighted by the noise at its row neighbours'
+    /// level; the others counted as saturated, on the edge or impulses.
+    fn keep(
+        &self,
+        out: &mut SphereData,
+        smp: &[Sample],
+        sigma: &dyn Fn(usize, f64) -> f64,
+        full_scale: [f64; 3],
+    ) {
+        let turn = &self.turn;
+        for (k, x) in smp.iter().enumerate() {
+            if x.flags & samples::SATURATED != 0 {
+                out.saturated += 1;
+                continue;
+            }
+            if x.flags & samples::EDGE != 0 {
+                out.edge += 1;
+                continue;
+            }
+            // The level of the pixel's row neighbours (not its own value: a weight that
+            // depends on the pixel's own noise biases the fit toward its low values).
+            let mut level = [0.0; 3];
+            let mut n = 0.0;
+            for nb in [k.wrapping_sub(1), k + 1] {
+                if let Some(y) = smp.get(nb) {
+                    if y.px[1] == x.px[1] && y.px[0].abs_diff(x.px[0]) == 1 {
+                        for (l, v) in level.iter_mut().zip(&y.radiance) {
+                            *l += v;
                         }
+                        n += 1.0;
                     }
                 }
-                let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
-                // An impulse: the shading is smooth from one pixel to the next (the highlight
-                // less so), so a pixel far from its two neighbours' mean (whose difference has
-                // variance 1.5σ²) is not the sphere. A pooled cell would average it in, where
-                // the robust loss no longer sees it.
-                let fraction = if x.flags & samples::HIGHLIGHT == 0 {
-                    IMPULSE_FRACTION
-                } else {
-                    IMPULSE_FRACTION_HIGHLIGHT
-                };
-                if n == 2.0
-                    && (0..3).any(|c| {
-                        (x.radiance[c] - level[c]).abs()
-                            > IMPULSE_SIGMA * 1.5f64.sqrt() * sigma(c, level[c])
-                                + fraction * level[c].abs()
-                    })
-                {
-                    out.impulses += 1;
-                    continue;
-                }
-                // Near full scale the noise is censored (values pushed over it were clipped and
-                // left out), so the rest average low: leave out pixels whose neighbours' level
-                // is within 3σ of clipping.
-                if (0..3).any(|c| level[c] + 3.0 * sigma(c, level[c]) >= full_scale[c]) {
-                    out.saturated += 1;
-                    continue;
-                }
-                let (normal, view) = match &turn {
-                    Some(r) => (r * x.normal, r * x.view),
-                    None => (x.normal, x.view),
-                };
-                out.obs.push(Obs {
-                    geometry: Geometry {
-                        normal,
-                        view,
-                        radius_mm: s.radius_mm,
-                    },
-                    radiance: x.radiance,
-                    weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
-                });
-                out.px.push(x.px);
             }
-            out
-        })
-        .collect();
-    Ok(Observed {
-        spheres,
-        decode_s,
-        samples_s: t1.elapsed().as_secs_f64(),
-        floors,
-    })
+            let level = [0, 1, 2].map(|c| if n > 0.0 { level[c] / n } else { x.radiance[c] });
+            // An impulse: the shading is smooth from one pixel to the next (the highlight
+            // less so), so a pixel far from its two neighbours' mean (whose difference has
+            // variance 1.5σ²) is not the sphere. A pooled cell would average it in, where
+            // the robust loss no longer sees it.
+            let fraction = if x.flags & samples::HIGHLIGHT == 0 {
+                IMPULSE_FRACTION
+            } else {
+                IMPULSE_FRACTION_HIGHLIGHT
+            };
+            if n == 2.0
+                && (0..3).any(|c| {
+                    (x.radiance[c] - level[c]).abs()
+                        > IMPULSE_SIGMA * 1.5f64.sqrt() * sigma(c, level[c])
+                            + fraction * level[c].abs()
+                })
+            {
+                out.impulses += 1;
+                continue;
+            }
+            // Near full scale the noise is censored (values pushed over it were clipped and
+            // left out), so the rest average low: leave out pixels whose neighbours' level
+            // is within 3σ of clipping.
+            if (0..3).any(|c| level[c] + 3.0 * sigma(c, level[c]) >= full_scale[c]) {
+                out.saturated += 1;
+                continue;
+            }
+            let (normal, view) = match &turn {
+                Some(r) => (r * x.normal, r * x.view),
+                None => (x.normal, x.view),
+            };
+            out.obs.push(Obs {
+                geometry: Geometry {
+                    normal,
+                    view,
+                    radius_mm: out.radius_mm,
+                },
+                radiance: x.radiance,
+                weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
+            });
+            out.px.push(x.px);
+        }
+    }
 }
