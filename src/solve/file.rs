@@ -72,32 +72,10 @@ pub(super) fn fit_file(
     notes: Vec<String>,
     t0: Instant,
 ) -> FitFile {
-    let used: Vec<&SphereRmse> = spheres.iter().filter(|s| !s.held_out).collect();
-    let n: f64 = used.iter().map(|s| s.pixels as f64).sum::<f64>().max(1.0);
-    let overall = (used
-        .iter()
-        .map(|s| s.rmse.powi(2) * s.pixels as f64)
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    let relative = (used
-        .iter()
-        .map(|s| s.rel_rmse.powi(2) * s.pixels as f64)
-        .sum::<f64>()
-        / n)
-        .sqrt();
+    let (overall, relative) = overall_rmse(&spheres);
     let p = &outcome.params;
     let m = &p.material;
     let l_dir = p.light.direction();
-    let light_deg = (outcome.std[idx::AZIMUTH].powi(2) * p.light.elevation.cos().powi(2)
-        + outcome.std[idx::ELEVATION].powi(2))
-    .sqrt()
-    .to_degrees();
-    let free_names: Vec<String> = (0..N_PARAMS)
-        .filter(|&k| outcome.free[k])
-        .map(|k| PARAM_NAMES[k].to_string())
-        .collect();
-    let nc = outcome.correlation.nrows();
     FitFile {
         schema: SCHEMA.into(),
         method: opts.method,
@@ -114,22 +92,7 @@ pub(super) fn fit_file(
         light_direction: [l_dir.x, l_dir.y, l_dir.z],
         light_azimuth_deg: p.light.azimuth.to_degrees(),
         light_elevation_deg: p.light.elevation.to_degrees(),
-        image_lights: l
-            .frames
-            .iter()
-            .flatten()
-            .zip(&l.report.images)
-            .map(|(r, im)| {
-                let d = r.inverse() * l_dir;
-                let a = LightAngles::from_direction(&d);
-                ImageLightJson {
-                    file: im.file.clone(),
-                    direction: [d.x, d.y, d.z],
-                    azimuth_deg: a.azimuth.to_degrees(),
-                    elevation_deg: a.elevation.to_degrees(),
-                }
-            })
-            .collect(),
+        image_lights: image_lights(l, &l_dir),
         sigma_exponent: outcome
             .extensions
             .sigma_exponent
@@ -144,28 +107,7 @@ pub(super) fn fit_file(
         }),
         reference_radius_mm: outcome.model.reference_radius_mm,
         entry_transmission: outcome.model.entry_fresnel,
-        std: StdJson {
-            sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
-            albedo: [outcome.std[3], outcome.std[4], outcome.std[5]],
-            eta: outcome.std[idx::ETA],
-            specular: outcome.specular.then_some(SpecularJson {
-                ks: outcome.std[idx::KS],
-                alpha: outcome.std[idx::ALPHA],
-            }),
-            light_deg,
-            sigma_exponent: outcome
-                .extensions
-                .sigma_exponent
-                .then_some(outcome.std[idx::SIGMA_EXPONENT]),
-            albedo_curvature: outcome
-                .extensions
-                .albedo_curvature
-                .then_some(outcome.std[idx::ALBEDO_CURVATURE]),
-            kernel: outcome.extensions.two_gaussian.then_some(KernelJson {
-                weight: outcome.std[idx::KERNEL_WEIGHT],
-                ratio: outcome.std[idx::KERNEL_RATIO],
-            }),
-        },
+        std: std_json(&outcome),
         std_source: format!(
             "{}{}",
             match &outcome.jackknife {
@@ -188,27 +130,8 @@ pub(super) fn fit_file(
                 std: f.std.map(|v| v * e),
             }
         }),
-        parameters: (0..N_PARAMS)
-            .map(|k| ParamJson {
-                name: PARAM_NAMES[k].into(),
-                value: p.to_vec()[k],
-                std: outcome.std[k],
-                std_formal: outcome.jackknife.as_ref().map(|_| outcome.std_formal[k]),
-                std_jackknife: outcome.jackknife.as_ref().map(|j| j.std[k]),
-                prior_tension: (outcome.prior_tension[k] > 1.0).then_some(outcome.prior_tension[k]),
-                status: outcome.status[k].clone(),
-            })
-            .collect(),
-        correlation: CorrelationJson {
-            names: if nc == free_names.len() {
-                free_names
-            } else {
-                PARAM_NAMES[..nc].iter().map(|s| s.to_string()).collect()
-            },
-            matrix: (0..nc)
-                .map(|i| (0..nc).map(|j| outcome.correlation[(i, j)]).collect())
-                .collect(),
-        },
+        parameters: parameters(&outcome),
+        correlation: correlation(&outcome),
         rmse: RmseJson {
             overall,
             relative,
@@ -228,5 +151,109 @@ pub(super) fn fit_file(
         },
         options: fingerprint(opts),
         inputs: l.inputs.clone(),
+    }
+}
+
+/// The RMSE over the fitted spheres (pixel-weighted), absolute and relative.
+fn overall_rmse(spheres: &[SphereRmse]) -> (f64, f64) {
+    let used: Vec<&SphereRmse> = spheres.iter().filter(|s| !s.held_out).collect();
+    let n: f64 = used.iter().map(|s| s.pixels as f64).sum::<f64>().max(1.0);
+    let overall = (used
+        .iter()
+        .map(|s| s.rmse.powi(2) * s.pixels as f64)
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let relative = (used
+        .iter()
+        .map(|s| s.rel_rmse.powi(2) * s.pixels as f64)
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    (overall, relative)
+}
+
+/// Each photo's light (one light per photo): the fitted light turned back into its frame.
+fn image_lights(l: &Loaded, l_dir: &nalgebra::Vector3<f64>) -> Vec<ImageLightJson> {
+    l.frames
+        .iter()
+        .flatten()
+        .zip(&l.report.images)
+        .map(|(r, im)| {
+            let d = r.inverse() * l_dir;
+            let a = LightAngles::from_direction(&d);
+            ImageLightJson {
+                file: im.file.clone(),
+                direction: [d.x, d.y, d.z],
+                azimuth_deg: a.azimuth.to_degrees(),
+                elevation_deg: a.elevation.to_degrees(),
+            }
+        })
+        .collect()
+}
+
+/// The stated standard errors, the light's as one angle.
+fn std_json(outcome: &Outcome) -> StdJson {
+    let p = &outcome.params;
+    let light_deg = (outcome.std[idx::AZIMUTH].powi(2) * p.light.elevation.cos().powi(2)
+        + outcome.std[idx::ELEVATION].powi(2))
+    .sqrt()
+    .to_degrees();
+    StdJson {
+        sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
+        albedo: [outcome.std[3], outcome.std[4], outcome.std[5]],
+        eta: outcome.std[idx::ETA],
+        specular: outcome.specular.then_some(SpecularJson {
+            ks: outcome.std[idx::KS],
+            alpha: outcome.std[idx::ALPHA],
+        }),
+        light_deg,
+        sigma_exponent: outcome
+            .extensions
+            .sigma_exponent
+            .then_some(outcome.std[idx::SIGMA_EXPONENT]),
+        albedo_curvature: outcome
+            .extensions
+            .albedo_curvature
+            .then_some(outcome.std[idx::ALBEDO_CURVATURE]),
+        kernel: outcome.extensions.two_gaussian.then_some(KernelJson {
+            weight: outcome.std[idx::KERNEL_WEIGHT],
+            ratio: outcome.std[idx::KERNEL_RATIO],
+        }),
+    }
+}
+
+/// Every parameter with its value, errors and status.
+fn parameters(outcome: &Outcome) -> Vec<ParamJson> {
+    let p = &outcome.params;
+    (0..N_PARAMS)
+        .map(|k| ParamJson {
+            name: PARAM_NAMES[k].into(),
+            value: p.to_vec()[k],
+            std: outcome.std[k],
+            std_formal: outcome.jackknife.as_ref().map(|_| outcome.std_formal[k]),
+            std_jackknife: outcome.jackknife.as_ref().map(|j| j.std[k]),
+            prior_tension: (outcome.prior_tension[k] > 1.0).then_some(outcome.prior_tension[k]),
+            status: outcome.status[k].clone(),
+        })
+        .collect()
+}
+
+/// The free parameters' correlation matrix.
+fn correlation(outcome: &Outcome) -> CorrelationJson {
+    let free_names: Vec<String> = (0..N_PARAMS)
+        .filter(|&k| outcome.free[k])
+        .map(|k| PARAM_NAMES[k].to_string())
+        .collect();
+    let nc = outcome.correlation.nrows();
+    CorrelationJson {
+        names: if nc == free_names.len() {
+            free_names
+        } else {
+            PARAM_NAMES[..nc].iter().map(|s| s.to_string()).collect()
+        },
+        matrix: (0..nc)
+            .map(|i| (0..nc).map(|j| outcome.correlation[(i, j)]).collect())
+            .collect(),
     }
 }

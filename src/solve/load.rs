@@ -93,100 +93,18 @@ pub(super) fn load_inspected(
         ..Timings::default()
     };
     let mut skipped = vec![];
-    let proj = match &report.camera {
-        Some(c) => {
-            skipped.push(format!(
-                "calibration: camera from {} (not recalibrated)",
-                report
-                    .intrinsics_file
-                    .as_ref()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default()
-            ));
-            Projection::Perspective(*c)
-        }
-        None => {
-            skipped.push("calibration: no intrinsics in session.json, orthographic camera".into());
-            Projection::Orthographic
-        }
-    };
+    let proj = projection(&report, &mut skipped);
     let detections_path = report.session_file.with_file_name("detections.json");
     let t1 = Instant::now();
-    let reuse = if opts.redetect {
-        Err("--redetect".to_string())
-    } else {
-        reusable(&detections_path, &report, &now)
-    };
-    let detections = match reuse {
-        Ok(d) => {
-            skipped.push("detection: detections.json reused (its inputs unchanged)".into());
-            d
-        }
-        Err(why) => {
-            let d = detect::run(&detect::Options {
-                session: report.session_file.clone(),
-                out: None,
-                overlays: true,
-                quiet: opts.quiet,
-            })?;
-            skipped.push(format!("detection: ran ({why})"));
-            d
-        }
-    };
+    let detections = detections(opts, &report, &now, &detections_path, &mut skipped)?;
     timings.detect_s = t1.elapsed().as_secs_f64();
     let mut inputs = now;
     inputs.insert(
         detections_path.display().to_string(),
         fingerprint::of_file(&detections_path)?,
     );
-    // One light per photo: each photo is turned so that its light (from its own highlights)
-    // lies on the first photo's, the material is fitted in that common frame, and the light's
-    // prior is the photos' lights combined (`observe::light_frames`).
-    let (light, light_std, frames) = match sess.light {
-        LightMode::Shared => (
-            detections.light_direction.map(Vector3::from),
-            detections.light_std_deg.map(f64::to_radians),
-            None,
-        ),
-        LightMode::PerImage => {
-            let mut lights = vec![];
-            let mut info = 0.0;
-            for im in &detections.images {
-                let (Some(l), Some(sd)) = (im.light_direction, im.light_std_deg) else {
-                    return Err(Error::invalid(
-                        &report.session_file,
-                        format!(
-                            "\"light\": \"per-image\", but {} has no usable highlight: its light is unknown (detections.json says why)",
-                            im.file
-                        ),
-                    ));
-                };
-                lights.push(Vector3::from(l));
-                info += 1.0 / sd.to_radians().max(detect::LIGHT_FLOOR).powi(2);
-            }
-            let reference = lights[0];
-            let frames = observe::light_frames(&lights, &reference);
-            skipped.push(format!(
-                "light: one per photo ({} photos), each turned onto the first photo's light; the fit refines a correction they share",
-                lights.len()
-            ));
-            (Some(reference), Some(info.powf(-0.5)), Some(frames))
-        }
-    };
-    let hl: Vec<&detections::HighlightJson> = detections
-        .images
-        .iter()
-        .flat_map(|i| i.spheres.iter())
-        .filter_map(|s| s.highlight.as_ref())
-        .filter(|h| !h.outlier)
-        .collect();
-    let highlight_radius = hl
-        .iter()
-        .map(|h| h.radius_deg.to_radians())
-        .fold(None, |a: Option<f64>, r| Some(a.map_or(r, |a| a.max(r))));
-    let mut alphas: Vec<f64> = hl.iter().filter_map(|h| h.alpha).collect();
-    alphas.sort_by(|a, b| a.total_cmp(b));
-    let alpha = alphas.get(alphas.len() / 2).copied();
+    let (light, light_std, frames) = lights(&sess, &detections, &report, &mut skipped)?;
+    let (highlight_radius, alpha) = highlight_radius_alpha(&detections);
     let obs = observe::observe(
         &report,
         &sess,
@@ -300,4 +218,126 @@ pub(super) fn cached(
     fingerprint::differs(&f.inputs, &now)
         .is_none()
         .then_some((f, out))
+}
+
+/// The camera: the session's intrinsics (perspective), else orthographic; said in `skipped`.
+fn projection(report: &SessionReport, skipped: &mut Vec<String>) -> Projection {
+    match &report.camera {
+        Some(c) => {
+            skipped.push(format!(
+                "calibration: camera from {} (not recalibrated)",
+                report
+                    .intrinsics_file
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            ));
+            Projection::Perspective(*c)
+        }
+        None => {
+            skipped.push("calibration: no intrinsics in session.json, orthographic camera".into());
+            Projection::Orthographic
+        }
+    }
+}
+
+/// detections.json reused when its inputs are unchanged (and not `--redetect`), else detection
+/// run; said in `skipped`.
+fn detections(
+    opts: &Options,
+    report: &SessionReport,
+    now: &Inputs,
+    detections_path: &Path,
+    skipped: &mut Vec<String>,
+) -> Result<Detections> {
+    let reuse = if opts.redetect {
+        Err("--redetect".to_string())
+    } else {
+        reusable(detections_path, report, now)
+    };
+    Ok(match reuse {
+        Ok(d) => {
+            skipped.push("detection: detections.json reused (its inputs unchanged)".into());
+            d
+        }
+        Err(why) => {
+            let d = detect::run(&detect::Options {
+                session: report.session_file.clone(),
+                out: None,
+                overlays: true,
+                quiet: opts.quiet,
+            })?;
+            skipped.push(format!("detection: ran ({why})"));
+            d
+        }
+    })
+}
+
+/// The light (the session's), its standard error (radians), and each photo's rotation onto it.
+type Lights = (
+    Option<Vector3<f64>>,
+    Option<f64>,
+    Option<Vec<nalgebra::Rotation3<f64>>>,
+);
+
+/// The detector's light and its error, and under `"light": "per-image"` each photo's rotation
+/// onto the first photo's light: each photo is turned so that its light (from its own
+/// highlights) lies on the first photo's, the material is fitted in that common frame, and the
+/// light's prior is the photos' lights combined (`observe::light_frames`).
+fn lights(
+    sess: &Session,
+    detections: &Detections,
+    report: &SessionReport,
+    skipped: &mut Vec<String>,
+) -> Result<Lights> {
+    Ok(match sess.light {
+        LightMode::Shared => (
+            detections.light_direction.map(Vector3::from),
+            detections.light_std_deg.map(f64::to_radians),
+            None,
+        ),
+        LightMode::PerImage => {
+            let mut lights = vec![];
+            let mut info = 0.0;
+            for im in &detections.images {
+                let (Some(l), Some(sd)) = (im.light_direction, im.light_std_deg) else {
+                    return Err(Error::invalid(
+                        &report.session_file,
+                        format!(
+                            "\"light\": \"per-image\", but {} has no usable highlight: its light is unknown (detections.json says why)",
+                            im.file
+                        ),
+                    ));
+                };
+                lights.push(Vector3::from(l));
+                info += 1.0 / sd.to_radians().max(detect::LIGHT_FLOOR).powi(2);
+            }
+            let reference = lights[0];
+            let frames = observe::light_frames(&lights, &reference);
+            skipped.push(format!(
+                "light: one per photo ({} photos), each turned onto the first photo's light; the fit refines a correction they share",
+                lights.len()
+            ));
+            (Some(reference), Some(info.powf(-0.5)), Some(frames))
+        }
+    })
+}
+
+/// The highlights' largest angular radius and their median roughness (outliers left out).
+fn highlight_radius_alpha(detections: &Detections) -> (Option<f64>, Option<f64>) {
+    let hl: Vec<&detections::HighlightJson> = detections
+        .images
+        .iter()
+        .flat_map(|i| i.spheres.iter())
+        .filter_map(|s| s.highlight.as_ref())
+        .filter(|h| !h.outlier)
+        .collect();
+    let highlight_radius = hl
+        .iter()
+        .map(|h| h.radius_deg.to_radians())
+        .fold(None, |a: Option<f64>, r| Some(a.map_or(r, |a| a.max(r))));
+    let mut alphas: Vec<f64> = hl.iter().filter_map(|h| h.alpha).collect();
+    alphas.sort_by(|a, b| a.total_cmp(b));
+    let alpha = alphas.get(alphas.len() / 2).copied();
+    (highlight_radius, alpha)
 }
