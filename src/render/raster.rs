@@ -337,6 +337,159 @@ pub fn render(scene: &Scene, cam: &Camera, shader: &Shader, samples: Samples) ->
     img
 }
 
+/// What every band of the image is rasterized with.
+struct Bands<'a> {
+    scene: &'a Scene,
+    shader: &'a Shader<'a>,
+    setups: &'a [Option<Setup>],
+    /// The samples' offsets within a pixel.
+    offsets: &'a [[f32; 2]],
+    /// The exit transmission over n·v.
+    t_table: &'a [f32],
+    l: [f32; 3],
+    /// Image width.
+    w: usize,
+}
+
+impl Bands<'_> {
+    /// The nearest triangle at every sample of the band starting at row `y0` (`rows` rows): its
+    /// id and inverse depth.
+    fn depth_test(&self, bin: &[u32], y0: usize, rows: usize, depth: &mut [f32], id: &mut [u32]) {
+        let (w, ns, setups, offsets) = (self.w, self.offsets.len(), self.setups, self.offsets);
+        let mut delta = vec![[0.0f32; 3]; ns];
+        for &t in bin {
+            let s = setups[t as usize]
+                .as_ref()
+                .expect("binned triangles have a setup");
+            // Barycentrics step by dx per pixel; each sample adds a fixed offset. A pixel
+            // whose centre lies further than half a pixel outside an edge holds no sample.
+            for (d, o) in delta.iter_mut().zip(offsets) {
+                *d = std::array::from_fn(|e| s.dx[e] * o[0] + s.dy[e] * o[1]);
+            }
+            let margin: [f32; 3] = std::array::from_fn(|e| -0.5 * (s.dx[e].abs() + s.dy[e].abs()));
+            let ya = (s.bbox[1] as usize).max(y0);
+            let yb = (s.bbox[3] as usize).min(y0 + rows - 1);
+            let (xa, xb) = (s.bbox[0] as usize, s.bbox[2] as usize);
+            for py in ya..=yb {
+                let mut lam = s.bary(xa as f32, py as f32);
+                for px in xa..=xb {
+                    if lam[0] >= margin[0] && lam[1] >= margin[1] && lam[2] >= margin[2] {
+                        let base = ((py - y0) * w + px) * ns;
+                        for (k, d) in delta.iter().enumerate() {
+                            let bc = [lam[0] + d[0], lam[1] + d[1], lam[2] + d[2]];
+                            if bc[0] < 0.0 || bc[1] < 0.0 || bc[2] < 0.0 {
+                                continue;
+                            }
+                            let iz = bc[0] * s.iz[0] + bc[1] * s.iz[1] + bc[2] * s.iz[2];
+                            if iz > depth[base + k] {
+                                depth[base + k] = iz;
+                                id[base + k] = t;
+                            }
+                        }
+                    }
+                    lam = [lam[0] + s.dx[0], lam[1] + s.dx[1], lam[2] + s.dx[2]];
+                }
+            }
+        }
+    }
+
+    /// Each pixel of the band between columns `xa` and `xb`: its samples grouped by surface,
+    /// each group shaded once at its centroid, averaged; the coverage the share of samples hit.
+    fn resolve(
+        &self,
+        (y0, rows): (usize, usize),
+        (xa, xb): (usize, usize),
+        id: &[u32],
+        out: &mut [[f32; 3]],
+        cov: &mut [f32],
+    ) {
+        let (w, ns, setups, offsets) = (self.w, self.offsets.len(), self.setups, self.offsets);
+        let (scene, shader, t_table, l) = (self.scene, self.shader, self.t_table, &self.l);
+        for r in 0..rows {
+            for px in xa..xb {
+                let base = (r * w + px) * ns;
+                let ids = &id[base..base + ns];
+                if ids.iter().all(|&t| t == u32::MAX) {
+                    continue;
+                }
+                let mut acc = [0.0f32; 3];
+                let mut hit = 0usize;
+                // Samples whose triangle shares a vertex with an earlier group's triangle
+                // belong to the same surface (interpolated normals are continuous across it):
+                // they join that group, so a pixel inside a surface is shaded once.
+                let mut group = [u8::MAX; 16];
+                for k in 0..ns {
+                    let t = ids[k];
+                    if t == u32::MAX {
+                        continue;
+                    }
+                    let tri = &scene.triangles[t as usize];
+                    group[k] = (0..k as u8)
+                        .find(|&m| {
+                            let m = m as usize;
+                            ids[m] != u32::MAX && group[m] as usize == m && {
+                                let o = &scene.triangles[ids[m] as usize];
+                                tri.iter().any(|v| o.contains(v))
+                            }
+                        })
+                        .unwrap_or(k as u8);
+                }
+                for k in 0..ns {
+                    if group[k] as usize != k {
+                        continue;
+                    }
+                    // This group's samples: count and centroid (on the leader's triangle).
+                    let t = ids[k];
+                    let (mut n, mut sx, mut sy) = (0usize, 0.0f32, 0.0f32);
+                    for (m, o) in offsets.iter().enumerate().skip(k) {
+                        if group[m] as usize == k {
+                            n += 1;
+                            sx += o[0];
+                            sy += o[1];
+                        }
+                    }
+                    let s = setups[t as usize]
+                        .as_ref()
+                        .expect("hit triangles have a setup");
+                    let (qx, qy) = (px as f32 + sx / n as f32, (y0 + r) as f32 + sy / n as f32);
+                    let c = shade_at(
+                        scene,
+                        shader,
+                        &t_table,
+                        &l,
+                        s,
+                        &scene.triangles[t as usize],
+                        qx,
+                        qy,
+                    );
+                    for ch in 0..3 {
+                        acc[ch] += c[ch] * n as f32;
+                    }
+                    hit += n;
+                }
+                let inv = 1.0 / ns as f32;
+                out[r * w + px] = [acc[0] * inv, acc[1] * inv, acc[2] * inv];
+                cov[r * w + px] = hit as f32 * inv;
+            }
+        }
+    }
+}
+
+/// Each band of `BAND` rows: the triangles whose boxes reach it.
+fn bin_triangles(setups: &[Option<Setup>], h: usize) -> Vec<Vec<u32>> {
+    let n_bands = h.div_ceil(BAND);
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); n_bands];
+    for (k, s) in setups.iter().enumerate() {
+        if let Some(s) = s {
+            let (b0, b1) = (s.bbox[1] as usize / BAND, s.bbox[3] as usize / BAND);
+            for bin in &mut bins[b0..=b1] {
+                bin.push(k as u32);
+            }
+        }
+    }
+    bins
+}
+
 /// Render into `img`, reusing its buffers (every pixel is written): the frame loop of an
 /// interactive viewer, and what `benches/render.rs` times.
 pub fn render_into(
@@ -356,24 +509,23 @@ pub fn render_into(
         .par_iter()
         .map(|t| setup(scene, cam, t))
         .collect();
-    let n_bands = h.div_ceil(BAND);
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); n_bands];
-    for (k, s) in setups.iter().enumerate() {
-        if let Some(s) = s {
-            let (b0, b1) = (s.bbox[1] as usize / BAND, s.bbox[3] as usize / BAND);
-            for bin in &mut bins[b0..=b1] {
-                bin.push(k as u32);
-            }
-        }
-    }
+    let bins = bin_triangles(&setups, h);
     let offsets = samples.offsets();
     let ns = offsets.len();
     let t_table = shader.fresnel_table();
-    let l = [
-        shader.light.x as f32,
-        shader.light.y as f32,
-        shader.light.z as f32,
-    ];
+    let bands = Bands {
+        scene,
+        shader,
+        setups: &setups,
+        offsets: &offsets,
+        t_table: &t_table,
+        l: [
+            shader.light.x as f32,
+            shader.light.y as f32,
+            shader.light.z as f32,
+        ],
+        w,
+    };
     img.rgb
         .par_chunks_mut(w * BAND)
         .zip(img.coverage.par_chunks_mut(w * BAND))
@@ -399,110 +551,8 @@ pub fn render_into(
                         id[(r * w + xa) * ns..(r * w + xb) * ns].fill(u32::MAX);
                     }
                 }
-                let mut delta = vec![[0.0f32; 3]; ns];
-                for &t in bin {
-                    let s = setups[t as usize]
-                        .as_ref()
-                        .expect("binned triangles have a setup");
-                    // Barycentrics step by dx per pixel; each sample adds a fixed offset. A pixel
-                    // whose centre lies further than half a pixel outside an edge holds no sample.
-                    for (d, o) in delta.iter_mut().zip(&offsets) {
-                        *d = std::array::from_fn(|e| s.dx[e] * o[0] + s.dy[e] * o[1]);
-                    }
-                    let margin: [f32; 3] =
-                        std::array::from_fn(|e| -0.5 * (s.dx[e].abs() + s.dy[e].abs()));
-                    let ya = (s.bbox[1] as usize).max(y0);
-                    let yb = (s.bbox[3] as usize).min(y0 + rows - 1);
-                    let (xa, xb) = (s.bbox[0] as usize, s.bbox[2] as usize);
-                    for py in ya..=yb {
-                        let mut lam = s.bary(xa as f32, py as f32);
-                        for px in xa..=xb {
-                            if lam[0] >= margin[0] && lam[1] >= margin[1] && lam[2] >= margin[2] {
-                                let base = ((py - y0) * w + px) * ns;
-                                for (k, d) in delta.iter().enumerate() {
-                                    let bc = [lam[0] + d[0], lam[1] + d[1], lam[2] + d[2]];
-                                    if bc[0] < 0.0 || bc[1] < 0.0 || bc[2] < 0.0 {
-                                        continue;
-                                    }
-                                    let iz = bc[0] * s.iz[0] + bc[1] * s.iz[1] + bc[2] * s.iz[2];
-                                    if iz > depth[base + k] {
-                                        depth[base + k] = iz;
-                                        id[base + k] = t;
-                                    }
-                                }
-                            }
-                            lam = [lam[0] + s.dx[0], lam[1] + s.dx[1], lam[2] + s.dx[2]];
-                        }
-                    }
-                }
-                for r in 0..rows {
-                    for px in xa..xb {
-                        let base = (r * w + px) * ns;
-                        let ids = &id[base..base + ns];
-                        if ids.iter().all(|&t| t == u32::MAX) {
-                            continue;
-                        }
-                        let mut acc = [0.0f32; 3];
-                        let mut hit = 0usize;
-                        // Samples whose triangle shares a vertex with an earlier group's triangle
-                        // belong to the same surface (interpolated normals are continuous across it):
-                        // they join that group, so a pixel inside a surface is shaded once.
-                        let mut group = [u8::MAX; 16];
-                        for k in 0..ns {
-                            let t = ids[k];
-                            if t == u32::MAX {
-                                continue;
-                            }
-                            let tri = &scene.triangles[t as usize];
-                            group[k] = (0..k as u8)
-                                .find(|&m| {
-                                    let m = m as usize;
-                                    ids[m] != u32::MAX && group[m] as usize == m && {
-                                        let o = &scene.triangles[ids[m] as usize];
-                                        tri.iter().any(|v| o.contains(v))
-                                    }
-                                })
-                                .unwrap_or(k as u8);
-                        }
-                        for k in 0..ns {
-                            if group[k] as usize != k {
-                                continue;
-                            }
-                            // This group's samples: count and centroid (on the leader's triangle).
-                            let t = ids[k];
-                            let (mut n, mut sx, mut sy) = (0usize, 0.0f32, 0.0f32);
-                            for (m, o) in offsets.iter().enumerate().skip(k) {
-                                if group[m] as usize == k {
-                                    n += 1;
-                                    sx += o[0];
-                                    sy += o[1];
-                                }
-                            }
-                            let s = setups[t as usize]
-                                .as_ref()
-                                .expect("hit triangles have a setup");
-                            let (qx, qy) =
-                                (px as f32 + sx / n as f32, (y0 + r) as f32 + sy / n as f32);
-                            let c = shade_at(
-                                scene,
-                                shader,
-                                &t_table,
-                                &l,
-                                s,
-                                &scene.triangles[t as usize],
-                                qx,
-                                qy,
-                            );
-                            for ch in 0..3 {
-                                acc[ch] += c[ch] * n as f32;
-                            }
-                            hit += n;
-                        }
-                        let inv = 1.0 / ns as f32;
-                        out[r * w + px] = [acc[0] * inv, acc[1] * inv, acc[2] * inv];
-                        cov[r * w + px] = hit as f32 * inv;
-                    }
-                }
+                bands.depth_test(bin, y0, rows, depth, id);
+                bands.resolve((y0, rows), (xa, xb), id, out, cov);
             },
         );
 }
