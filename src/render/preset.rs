@@ -443,13 +443,32 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         .map(|(ext, text)| (with(ext), text))
         .collect();
     let glb = with("glb");
-    let (unit, per_mm) = req.preset.curvature_unit();
     let mut members: Vec<&Path> = vec![&image, &json];
     members.extend(shaders.iter().map(|(p, _)| p.as_path()));
     if req.mesh.is_some() {
         members.push(&glb);
     }
     let set = OutputSet::begin(&members);
+    let colour_space = write_image(req, t, &image)?;
+    let sidecar = sidecar(req, t, &image, colour_space, &shaders, &glb)?;
+    for (path, text) in &shaders {
+        write_bytes(path, text.as_bytes())?;
+    }
+    write_mesh(req, t, &glb)?;
+    write_json(&json, &sidecar)?;
+    set.commit()?;
+    let mut paths = vec![image];
+    paths.extend(shaders.into_iter().map(|(p, _)| p));
+    if req.mesh.is_some() {
+        paths.push(glb);
+    }
+    paths.push(json);
+    Ok((paths, sidecar))
+}
+
+/// The table as the preset's picture (rows in its origin's order), written in the request's
+/// encoding. Returns the colour space it says.
+fn write_image(req: &WriteRequest, t: &EngineTable, image: &Path) -> Result<&'static str> {
     let (w, h) = (t.width, t.height);
     let scale = t.peak().max(f64::MIN_POSITIVE);
     // Picture rows top to bottom: texel row j is picture row j (top-left origin) or h − 1 − j.
@@ -460,7 +479,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
     let picture: Vec<[f32; 3]> = (0..h)
         .flat_map(|r| t.values[row_of(r) * w..(row_of(r) + 1) * w].iter().copied())
         .collect();
-    let colour_space = match req.encoding {
+    Ok(match req.encoding {
         Encoding::ExrHalf => {
             use exr::prelude::*;
             let img = Image::from_channels(
@@ -477,8 +496,8 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
             let mut bytes = std::io::Cursor::new(Vec::new());
             img.write()
                 .to_buffered(&mut bytes)
-                .map_err(|e| crate::error::Error::invalid(&image, format!("EXR encoding: {e}")))?;
-            write_bytes(&image, bytes.get_ref())?;
+                .map_err(|e| crate::error::Error::invalid(image, format!("EXR encoding: {e}")))?;
+            write_bytes(image, bytes.get_ref())?;
             "linear (no transfer curve), half float"
         }
         Encoding::Png16 => {
@@ -487,7 +506,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
                 .flat_map(|v| v.iter())
                 .map(|&x| ((x as f64 / scale).clamp(0.0, 1.0) * 65535.0).round() as u16)
                 .collect();
-            write_png16_rgb(&image, w as u32, h as u32, &q)?;
+            write_png16_rgb(image, w as u32, h as u32, &q)?;
             "linear (no transfer curve), 16-bit unsigned normalised"
         }
         Encoding::Png8Srgb => {
@@ -496,10 +515,25 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
                 .flat_map(|v| v.iter())
                 .map(|&x| (srgb_encode((x as f64 / scale).clamp(0.0, 1.0)) * 255.0).round() as u8)
                 .collect();
-            crate::formats::photo::write_8bit(&image, w as u32, h as u32, 3, &q, 100, None)?;
+            crate::formats::photo::write_8bit(image, w as u32, h as u32, 3, &q, 100, None)?;
             "sRGB transfer curve, 8-bit (import as colour: the GPU decodes it to linear)"
         }
-    };
+    })
+}
+
+/// The sidecar: every convention of the table, the fit's material and errors, and the errors
+/// measured on the table as stored.
+fn sidecar(
+    req: &WriteRequest,
+    t: &EngineTable,
+    image: &Path,
+    colour_space: &str,
+    shaders: &[(PathBuf, &str)],
+    glb: &Path,
+) -> Result<EngineLutJson> {
+    let (w, h) = (t.width, t.height);
+    let scale = t.peak().max(f64::MIN_POSITIVE);
+    let (unit, per_mm) = req.preset.curvature_unit();
     let [k0, k1] = t.kappa_range_per_mm;
     let meas = req.fm.measured_kappa;
     let measured_v = [t.v_of(meas[0]), t.v_of(meas[1])];
@@ -509,11 +543,11 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
     };
     let name = |p: &Path| file_name(p);
     let (stored_err, border_err) = t.stored(req.encoding).error(req.fm);
-    let sidecar = EngineLutJson {
+    Ok(EngineLutJson {
         schema: SCHEMA.into(),
         preset: req.preset,
         fit: req.fit_path.display().to_string(),
-        image: name(&image),
+        image: name(image),
         encoding: req.encoding,
         colour_space: colour_space.into(),
         width: w,
@@ -560,11 +594,13 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
         tolerance: req.tolerance,
         import_settings: req.preset.import_settings(req.encoding),
         shaders: shaders.iter().map(|(p, _)| name(p)).collect(),
-        mesh: req.mesh.map(|_| name(&glb)),
-    };
-    for (path, text) in &shaders {
-        write_bytes(path, text.as_bytes())?;
-    }
+        mesh: req.mesh.map(|_| name(glb)),
+    })
+}
+
+/// The mesh as binary glTF with workbench's curvature per vertex (and its v in the table).
+fn write_mesh(req: &WriteRequest, t: &EngineTable, glb: &Path) -> Result<()> {
+    let (_, per_mm) = req.preset.curvature_unit();
     if let Some((mesh, curvature)) = req.mesh {
         let f = |v: &nalgebra::Vector3<f64>, s: f64| {
             [(v.x * s) as f32, (v.y * s) as f32, (v.z * s) as f32]
@@ -586,15 +622,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
             },
             concat!("workbench ", env!("CARGO_PKG_VERSION")),
         );
-        write_bytes(&glb, &bytes)?;
+        write_bytes(glb, &bytes)?;
     }
-    write_json(&json, &sidecar)?;
-    set.commit()?;
-    let mut paths = vec![image];
-    paths.extend(shaders.into_iter().map(|(p, _)| p));
-    if req.mesh.is_some() {
-        paths.push(glb);
-    }
-    paths.push(json);
-    Ok((paths, sidecar))
+    Ok(())
 }
