@@ -603,16 +603,7 @@ pub fn generate(
     for (k, p) in plans.iter().enumerate() {
         let lin = render_linear(cfg, &p.spheres);
         let path = out.join(&p.file);
-        let noisy: Vec<f64> = {
-            let mut v = vec![0.0; lin.len()];
-            v.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
-                let mut rng = super::row_rng(cfg.seed, k as u64, y as u64);
-                for (o, i) in row.iter_mut().zip(&lin[y * w * 3..(y + 1) * w * 3]) {
-                    *o = super::sensor(*i, cfg.noise, cfg.read_noise, &mut rng);
-                }
-            });
-            v
-        };
+        let noisy = sensor_noise(cfg, &lin, k as u64);
         if let (0, Some(pv)) = (k, preview) {
             let q: Vec<u8> = noisy
                 .iter()
@@ -620,44 +611,9 @@ pub fn generate(
                 .collect();
             photo::write_8bit(pv, w as u32, h as u32, 3, &q, 0, None)?;
         }
-        match cfg.format {
-            Format::Png16 => {
-                let q: Vec<u16> = noisy.iter().map(|v| (v * 65535.0).round() as u16).collect();
-                photo::write_png16_rgb(&path, w as u32, h as u32, &q)?;
-            }
-            Format::Jpeg => {
-                let q: Vec<u8> = noisy
-                    .iter()
-                    .map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8)
-                    .collect();
-                photo::write_8bit(
-                    &path,
-                    w as u32,
-                    h as u32,
-                    3,
-                    &q,
-                    cfg.jpeg_quality,
-                    Some(&exif),
-                )?;
-            }
-        }
+        write_photo(cfg, &path, &noisy, &exif)?;
         images.push(path);
-        truth_images.push(TruthImage {
-            file: p.file.clone(),
-            exposure: cfg.exposure,
-            spheres: p
-                .spheres
-                .iter()
-                .map(|(r, s)| TruthSphere {
-                    radius_mm: *r,
-                    center_mm: [s.center.x, s.center.y, s.center.z],
-                    ellipse: s
-                        .image_ellipse(cam)
-                        .expect("sphere in front of the camera")
-                        .into(),
-                })
-                .collect(),
-        });
+        truth_images.push(truth_image(cfg, p));
         session_images.push(SessionImage {
             file: p.file.clone(),
             spheres: p
@@ -690,9 +646,86 @@ pub fn generate(
         floor: None,
         images: session_images,
     };
+    let truth = session_truth(cfg, truth_images);
+    let session_file = out.join("session.json");
+    let truth_file = out.join("truth.json");
+    write_json(&session_file, &session)?;
+    write_json(&truth_file, &truth)?;
+    Ok(SessionOutput {
+        session_file,
+        truth_file,
+        images,
+        truth,
+    })
+}
+
+/// The photo's noisy values: each row's shot and read noise from its own generator.
+fn sensor_noise(cfg: &SessionConfig, lin: &[f64], image: u64) -> Vec<f64> {
+    let w = cfg.camera.width() as usize;
+    let mut v = vec![0.0; lin.len()];
+    v.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+        let mut rng = super::row_rng(cfg.seed, image, y as u64);
+        for (o, i) in row.iter_mut().zip(&lin[y * w * 3..(y + 1) * w * 3]) {
+            *o = super::sensor(*i, cfg.noise, cfg.read_noise, &mut rng);
+        }
+    });
+    v
+}
+
+/// The photo in the session's format: 16-bit linear PNG, or 8-bit sRGB JPEG with EXIF.
+fn write_photo(cfg: &SessionConfig, path: &Path, noisy: &[f64], exif: &ExifInfo) -> Result<()> {
+    let (w, h) = (cfg.camera.width() as usize, cfg.camera.height() as usize);
+    match cfg.format {
+        Format::Png16 => {
+            let q: Vec<u16> = noisy.iter().map(|v| (v * 65535.0).round() as u16).collect();
+            photo::write_png16_rgb(path, w as u32, h as u32, &q)?;
+        }
+        Format::Jpeg => {
+            let q: Vec<u8> = noisy
+                .iter()
+                .map(|v| (photo::srgb_encode(*v) * 255.0).round() as u8)
+                .collect();
+            photo::write_8bit(
+                path,
+                w as u32,
+                h as u32,
+                3,
+                &q,
+                cfg.jpeg_quality,
+                Some(exif),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// What is true of one photo: its spheres' centres and image ellipses.
+fn truth_image(cfg: &SessionConfig, p: &ScenePlan) -> TruthImage {
+    let cam = &cfg.camera;
+    TruthImage {
+        file: p.file.clone(),
+        exposure: cfg.exposure,
+        spheres: p
+            .spheres
+            .iter()
+            .map(|(r, s)| TruthSphere {
+                radius_mm: *r,
+                center_mm: [s.center.x, s.center.y, s.center.z],
+                ellipse: s
+                    .image_ellipse(cam)
+                    .expect("sphere in front of the camera")
+                    .into(),
+            })
+            .collect(),
+    }
+}
+
+/// Everything true of the session.
+fn session_truth(cfg: &SessionConfig, images: Vec<TruthImage>) -> SessionTruth {
+    let cam = &cfg.camera;
     let l = cfg.light.direction();
     let m = &cfg.material;
-    let truth = SessionTruth {
+    SessionTruth {
         schema: TRUTH_SCHEMA.into(),
         kind: "session".into(),
         sigma0_mm: m.sigma0_mm,
@@ -709,7 +742,7 @@ pub fn generate(
         cdrf_convolution: cfg.convolution,
         entry_transmission: cfg.entry_transmission,
         intrinsics: IntrinsicsFile::from_truth(cam),
-        images: truth_images,
+        images,
         render: RenderTruth {
             noise: cfg.noise,
             read_noise: cfg.read_noise,
@@ -721,15 +754,5 @@ pub fn generate(
             backdrop: cfg.backdrop,
             stand: cfg.stand,
         },
-    };
-    let session_file = out.join("session.json");
-    let truth_file = out.join("truth.json");
-    write_json(&session_file, &session)?;
-    write_json(&truth_file, &truth)?;
-    Ok(SessionOutput {
-        session_file,
-        truth_file,
-        images,
-        truth,
-    })
+    }
 }
