@@ -423,8 +423,9 @@ pub struct Calibration {
     pub reports: Vec<ViewReport>,
 }
 
-/// Calibrate from detected views: choose the distortion model by held-out error, reject outlier
-/// views and re-solve, then compute uncertainties and quality warnings.
+/// Calibrate from detected views: reject outlier views (judged with the simpler model), choose
+/// the distortion model by held-out error, solve, then compute uncertainties and quality
+/// warnings.
 pub fn calibrate(
     backend: &dyn Backend,
     views: Vec<View>,
@@ -439,87 +440,10 @@ pub fn calibrate(
         )));
     }
     let mut notes = vec![];
-    let mut active = views;
-    let mut rejected: Vec<(View, f64, String)> = vec![];
-    let model_fixed = DistortionModel::K1K2P1P2;
-    let mut limit_used = f64::NAN;
-    // Outlier views, judged with the simpler model (up to a fifth of the views, at most 3 rounds).
-    for _ in 0..3 {
-        let refs: Vec<&[Vector2<f64>]> = active.iter().map(|v| v.corners.as_slice()).collect();
-        let sol = backend.calibrate(&refs, object, size, model_fixed)?;
-        let per_view: Vec<f64> = active
-            .iter()
-            .zip(&sol.poses)
-            .map(|(v, p)| rms(&view_residuals(&sol.camera, p, &v.corners, object)))
-            .collect();
-        let out = outlier_views(&per_view);
-        {
-            if limit_used.is_nan() || !out.is_empty() {
-                limit_used = outlier_limit(median(&per_view), mad_sigma(&per_view));
-            }
-        }
-        let budget = (active.len() + rejected.len()) / 5;
-        if out.is_empty()
-            || rejected.len() + out.len() > budget
-            || active.len() - out.len() < min_views
-        {
-            if !out.is_empty() {
-                notes.push(format!(
-                    "{} view(s) look like outliers but rejecting them would drop more than a fifth of the views: kept",
-                    out.len()
-                ));
-            }
-            break;
-        }
-        let med = median(&per_view);
-        let limit = outlier_limit(med, mad_sigma(&per_view));
-        for &i in out.iter().rev() {
-            let v = active.remove(i);
-            let why = format!(
-                "rejected: {:.3} px RMS, above the outlier limit {:.3} px (median {:.3} px)",
-                per_view[i], limit, med
-            );
-            notes.push(format!("{}: {why}", v.file));
-            rejected.push((v, per_view[i], why));
-        }
-    }
+    let (active, rejected, limit_used) =
+        reject_outliers(backend, views, object, size, min_views, &mut notes)?;
     let refs: Vec<&[Vector2<f64>]> = active.iter().map(|v| v.corners.as_slice()).collect();
-    // Distortion model by held-out error: k3 only when it predicts unseen views better by > 2%.
-    let folds = 5.min(refs.len());
-    let mut cvs = vec![];
-    let mut model = model_fixed;
-    if refs.len() >= 4 {
-        let cv4 = cross_validate(
-            backend,
-            &refs,
-            object,
-            size,
-            DistortionModel::K1K2P1P2,
-            folds,
-        )?;
-        let cv5 = cross_validate(
-            backend,
-            &refs,
-            object,
-            size,
-            DistortionModel::K1K2P1P2K3,
-            folds,
-        )?;
-        if cv5.heldout_rms_px < 0.98 * cv4.heldout_rms_px {
-            model = DistortionModel::K1K2P1P2K3;
-        }
-        notes.push(format!(
-            "distortion model: held-out RMS {:.4} px with k1 k2 p1 p2, {:.4} px with k3 too ({}-fold): using {}",
-            cv4.heldout_rms_px,
-            cv5.heldout_rms_px,
-            cv4.folds,
-            model.name()
-        ));
-        cvs.push(cv4);
-        cvs.push(cv5);
-    } else {
-        notes.push("too few views to cross-validate: k3 fixed at 0".into());
-    }
+    let (model, cvs) = distortion_model(backend, &refs, object, size, &mut notes)?;
     let sol = backend.calibrate(&refs, object, size, model)?;
     let std = intrinsic_uncertainty(&sol.camera, &sol.poses, &refs, object, model).map(|s| s.0);
     let mut used = vec![];
@@ -567,6 +491,114 @@ pub fn calibrate(
         warnings,
         reports,
     })
+}
+
+/// Views whose RMS is beyond the outlier limit, rejected round by round (up to a fifth of the
+/// views, at most 3 rounds) under the simpler model. Returns the views kept, those rejected
+/// (with their RMS and why) and the limit last used.
+#[allow(clippy::type_complexity)]
+fn reject_outliers(
+    backend: &dyn Backend,
+    views: Vec<View>,
+    object: &[Vector3<f64>],
+    size: [u32; 2],
+    min_views: usize,
+    notes: &mut Vec<String>,
+) -> crate::Result<(Vec<View>, Vec<(View, f64, String)>, f64)> {
+    let model_fixed = DistortionModel::K1K2P1P2;
+    let mut active = views;
+    let mut rejected: Vec<(View, f64, String)> = vec![];
+    let mut limit_used = f64::NAN;
+    // Outlier views, judged with the simpler model (up to a fifth of the views, at most 3 rounds).
+    for _ in 0..3 {
+        let refs: Vec<&[Vector2<f64>]> = active.iter().map(|v| v.corners.as_slice()).collect();
+        let sol = backend.calibrate(&refs, object, size, model_fixed)?;
+        let per_view: Vec<f64> = active
+            .iter()
+            .zip(&sol.poses)
+            .map(|(v, p)| rms(&view_residuals(&sol.camera, p, &v.corners, object)))
+            .collect();
+        let out = outlier_views(&per_view);
+        {
+            if limit_used.is_nan() || !out.is_empty() {
+                limit_used = outlier_limit(median(&per_view), mad_sigma(&per_view));
+            }
+        }
+        let budget = (active.len() + rejected.len()) / 5;
+        if out.is_empty()
+            || rejected.len() + out.len() > budget
+            || active.len() - out.len() < min_views
+        {
+            if !out.is_empty() {
+                notes.push(format!(
+                    "{} view(s) look like outliers but rejecting them would drop more than a fifth of the views: kept",
+                    out.len()
+                ));
+            }
+            break;
+        }
+        let med = median(&per_view);
+        let limit = outlier_limit(med, mad_sigma(&per_view));
+        for &i in out.iter().rev() {
+            let v = active.remove(i);
+            let why = format!(
+                "rejected: {:.3} px RMS, above the outlier limit {:.3} px (median {:.3} px)",
+                per_view[i], limit, med
+            );
+            notes.push(format!("{}: {why}", v.file));
+            rejected.push((v, per_view[i], why));
+        }
+    }
+    Ok((active, rejected, limit_used))
+}
+
+/// The distortion model by held-out error: k3 only when it predicts unseen views better by
+/// more than 2%. Returns the model and the cross-validations.
+fn distortion_model(
+    backend: &dyn Backend,
+    refs: &[&[Vector2<f64>]],
+    object: &[Vector3<f64>],
+    size: [u32; 2],
+    notes: &mut Vec<String>,
+) -> crate::Result<(DistortionModel, Vec<CrossValidation>)> {
+    let model_fixed = DistortionModel::K1K2P1P2;
+    // Distortion model by held-out error: k3 only when it predicts unseen views better by > 2%.
+    let folds = 5.min(refs.len());
+    let mut cvs = vec![];
+    let mut model = model_fixed;
+    if refs.len() >= 4 {
+        let cv4 = cross_validate(
+            backend,
+            refs,
+            object,
+            size,
+            DistortionModel::K1K2P1P2,
+            folds,
+        )?;
+        let cv5 = cross_validate(
+            backend,
+            refs,
+            object,
+            size,
+            DistortionModel::K1K2P1P2K3,
+            folds,
+        )?;
+        if cv5.heldout_rms_px < 0.98 * cv4.heldout_rms_px {
+            model = DistortionModel::K1K2P1P2K3;
+        }
+        notes.push(format!(
+            "distortion model: held-out RMS {:.4} px with k1 k2 p1 p2, {:.4} px with k3 too ({}-fold): using {}",
+            cv4.heldout_rms_px,
+            cv5.heldout_rms_px,
+            cv4.folds,
+            model.name()
+        ));
+        cvs.push(cv4);
+        cvs.push(cv5);
+    } else {
+        notes.push("too few views to cross-validate: k3 fixed at 0".into());
+    }
+    Ok((model, cvs))
 }
 
 /// Coverage and tilt warnings.
