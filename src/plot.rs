@@ -366,6 +366,21 @@ impl Plot {
         }
         mesh.draw().map_err(|x| e(&x))?;
 
+        self.draw_layers(&mut chart, (x0, x1), rasters)
+    }
+
+    /// Each layer into the chart, in order (`xr`: the x range, where a horizontal line runs). One
+    /// arm per kind of layer: the match is the clearest form.
+    fn draw_layers<DB: DrawingBackend>(
+        &self,
+        chart: &mut Chart<'_, DB>,
+        (x0, x1): (f64, f64),
+        rasters: &mut Rasters,
+    ) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        let e = |x: &dyn std::fmt::Display| x.to_string();
         for layer in &self.layers {
             match layer {
                 Layer::Cells { cells } => {
@@ -380,7 +395,7 @@ impl Plot {
                     width,
                     height,
                     rgb,
-                } => draw_image(&mut chart, *extent, *width, *height, rgb, rasters)?,
+                } => draw_image(chart, *extent, *width, *height, rgb, rasters)?,
                 Layer::Bars {
                     x,
                     heights,
@@ -411,11 +426,10 @@ impl Plot {
                     width,
                     dashed,
                     ..
-                } => line(&mut chart, xy, *color, *width, *dashed).map_err(|x| e(&x))?,
+                } => line(chart, xy, *color, *width, *dashed).map_err(|x| e(&x))?,
                 Layer::HLine {
                     y, color, dashed, ..
-                } => line(&mut chart, &[(x0, *y), (x1, *y)], *color, 2, *dashed)
-                    .map_err(|x| e(&x))?,
+                } => line(chart, &[(x0, *y), (x1, *y)], *color, 2, *dashed).map_err(|x| e(&x))?,
                 Layer::Text { items, size } => {
                     let style = TextStyle::from(("sans-serif", *size).into_font())
                         .pos(Pos::new(HPos::Center, VPos::Center));
