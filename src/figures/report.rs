@@ -50,13 +50,31 @@ table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border-bottom:1px soli
 td.n{text-align:right;font-variant-numeric:tabular-nums}figure{margin:1.5em 0}img{max-width:100%;border:1px solid #eee}\
 figcaption{color:#444;margin-top:0.3em}.bad{color:#b2182b;font-weight:bold}";
 
-/// Write `dir/index.html` for a fit and its figures.
+/// Write `dir/index.html` for a fit and its figures: the fit's headline, its parameters, the
+/// error per sphere, the per-radius fits, what was skipped and the notes, the figures.
 pub(crate) fn write_index(
     fit: &FitFile,
     fit_path: &Path,
     figures: &[Named],
     dir: &Path,
 ) -> Result<PathBuf> {
+    let mut h = [
+        heading(fit, fit_path),
+        parameters(fit),
+        spheres(fit),
+        per_radius(fit),
+        lists(fit),
+        figure_list(figures),
+    ]
+    .concat();
+    h.push_str("</body></html>\n");
+    let path = dir.join("index.html");
+    crate::formats::output::write_bytes(&path, h.as_bytes())?;
+    Ok(path)
+}
+
+/// The page's head and the fit's headline.
+fn heading(fit: &FitFile, fit_path: &Path) -> String {
     let mut h = String::new();
     let method = match fit.method {
         Method::Joint => "joint fit",
@@ -81,6 +99,12 @@ pub(crate) fn write_index(
         escape(&fit_path.display().to_string()),
         escape(&fit.schema)
     );
+    h
+}
+
+/// Each parameter with its error and status, and the light's direction.
+fn parameters(fit: &FitFile) -> String {
+    let mut h = String::new();
     h.push_str("<h2>Parameters</h2>\n<table><tr><th>parameter</th><th>value ± standard error</th><th>status</th></tr>\n");
     for p in &fit.parameters {
         let (v, e, unit) = match p.name.as_str() {
@@ -107,6 +131,12 @@ pub(crate) fn write_index(
         "<p>Light direction (camera frame, pointing to the light): [{:+.5}, {:+.5}, {:+.5}], ± {:.3}°.</p>",
         fit.light_direction[0], fit.light_direction[1], fit.light_direction[2], fit.std.light_deg
     );
+    h
+}
+
+/// The error per sphere, and the held-out radius's.
+fn spheres(fit: &FitFile) -> String {
+    let mut h = String::new();
     h.push_str("<h2>Error per sphere</h2>\n<table><tr><th>photo</th><th>sphere</th><th>radius (mm)</th><th>pixels used</th><th>saturated</th><th>edge</th><th>relative RMSE</th><th>lit</th><th>unlit</th><th></th></tr>\n");
     for s in &fit.rmse.spheres {
         let _ = writeln!(
@@ -136,6 +166,12 @@ pub(crate) fn write_index(
             100.0 * ho.unlit_rel_rmse
         );
     }
+    h
+}
+
+/// The per-radius fits (the paper's baseline, or the paper's method itself).
+fn per_radius(fit: &FitFile) -> String {
+    let mut h = String::new();
     let per_radius = fit
         .baseline
         .as_ref()
@@ -166,6 +202,12 @@ pub(crate) fn write_index(
         }
         h.push_str("</table>\n");
     }
+    h
+}
+
+/// What was skipped or reused, and the notes.
+fn lists(fit: &FitFile) -> String {
+    let mut h = String::new();
     for (title, items) in [("Skipped or reused", &fit.skipped), ("Notes", &fit.notes)] {
         if !items.is_empty() {
             let _ = writeln!(h, "<h2>{title}</h2>\n<ul>");
@@ -175,6 +217,12 @@ pub(crate) fn write_index(
             h.push_str("</ul>\n");
         }
     }
+    h
+}
+
+/// Every figure, linked to its SVG.
+fn figure_list(figures: &[Named]) -> String {
+    let mut h = String::new();
     h.push_str("<h2>Figures</h2>\n<p>Each picture links to its SVG.</p>\n");
     for f in figures {
         let _ = writeln!(
@@ -185,10 +233,7 @@ pub(crate) fn write_index(
             w = f.figure.size.0
         );
     }
-    h.push_str("</body></html>\n");
-    let path = dir.join("index.html");
-    crate::formats::output::write_bytes(&path, h.as_bytes())?;
-    Ok(path)
+    h
 }
 
 #[cfg(test)]
