@@ -441,91 +441,15 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
     let cam = &cfg.camera;
     let z = cfg.distance_mm;
     let centre = Vector3::new(0.04 * z, -0.03 * z, z);
-    let l = cfg.light.direction();
-    let pb = crate::progress::bar(cfg.radii_mm.len() as u64, "path tracing", quiet);
-    let mut renders = Vec::new();
-    for (k, &r) in cfg.radii_mm.iter().enumerate() {
-        let scene = Scene {
-            sphere: Sphere::new(centre, r),
-            light: l,
-            medium: cfg.medium,
-            boundary: Boundary {
-                eta: cfg.eta,
-                alpha: cfg.alpha,
-            },
-        };
-        let t0 = std::time::Instant::now();
-        let img = render(cam, &scene, cfg.spp, cfg.seed, k as u64);
-        let mean = img.mean();
-        renders.push((r, img, mean, t0.elapsed().as_secs_f64()));
-        pb.inc(1);
-    }
-    pb.finish_and_clear();
-    let subsurface: Vec<f64> = renders
-        .iter()
-        .flat_map(|(_, img, mean, _)| {
-            mean.iter()
-                .zip(&img.specular)
-                .filter(|(v, _)| v.iter().any(|c| *c > 0.0))
-                .flat_map(|(v, s)| v.map(|c| c - s))
-        })
-        .collect();
-    let reference = percentile(subsurface, 0.9997);
-    if !(reference > 0.0) {
-        return Err(Error::Argument(
-            "the render is black: is the light behind the spheres?".into(),
-        ));
-    }
-    let scale = 0.6 / reference;
+    let renders = render_all(cfg, centre, quiet);
+    let scale = exposure_scale(&renders)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut images = Vec::new();
     let mut photos = Vec::new();
     for (r, img, mean, secs) in &renders {
-        let file = if r.fract() == 0.0 {
-            format!("r{r:.0}.png")
-        } else {
-            format!("r{r}.png")
-        };
-        let q: Vec<u16> = mean
-            .iter()
-            .flat_map(|v| v.map(|c| ((c * scale).clamp(0.0, 1.0) * 65535.0).round() as u16))
-            .collect();
-        let saturated = mean
-            .iter()
-            .filter(|v| v.iter().any(|c| c * scale >= 1.0))
-            .count();
-        let lum: Vec<f64> = mean
-            .iter()
-            .zip(&img.specular)
-            .map(|(v, s)| (v[0] + v[1] + v[2]) / 3.0 - s)
-            .collect();
-        let p99 = percentile(lum.iter().cloned().filter(|v| *v > 0.0).collect(), 0.99);
-        let rel: Vec<f64> = (0..mean.len())
-            .filter(|&i| lum[i] > 0.1 * p99)
-            .map(|i| {
-                let (a, b) = (&img.halves[0][i], &img.halves[1][i]);
-                let m = (0..3).map(|c| 0.5 * (a[c] + b[c])).sum::<f64>();
-                let d = 0.5 * (0..3).map(|c| a[c] - b[c]).sum::<f64>().abs();
-                d / m
-            })
-            .collect();
-        // (a − b)/2 has the standard deviation of the mean (a + b)/2; the median of |N(0, s²)|
-        // is 0.6745 s.
-        let noise = (percentile(rel, 0.5) / 0.6745).max(0.0); // no lit pixel: 0
-        let path = out.join(&file);
-        photo::write_png16_rgb(&path, img.width as u32, img.height as u32, &q)?;
+        let (path, photo) = write_photo(cfg, out, centre, scale, (*r, img, mean, *secs))?;
         images.push(path);
-        photos.push(TruthPhoto {
-            file,
-            radius_mm: *r,
-            centre_mm: [centre.x, centre.y, centre.z],
-            noise_rel_median_lit: noise,
-            saturated_pixels: saturated,
-            spp: cfg.spp,
-            pixels_traced: img.pixels_traced,
-            mean_scatterings_per_path: img.mean_scatterings,
-            render_time_s: *secs,
-        });
+        photos.push(photo);
     }
     write_json(
         &out.join("intrinsics.json"),
@@ -548,7 +472,122 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
             .collect(),
     };
     write_json(&out.join("session.json"), &session)?;
-    let truth = PbrTruth {
+    let truth = pbr_truth(cfg, scale, photos);
+    write_json(&out.join("truth.json"), &truth)?;
+    Ok(PbrOutput { images, truth })
+}
+
+/// One render per radius: the radius, the render, its mean photo and the seconds it took.
+type Renders = Vec<(f64, Rendered, Vec<[f64; 3]>, f64)>;
+
+/// Every radius path-traced, the spheres at `centre`.
+fn render_all(cfg: &PbrConfig, centre: Vector3<f64>, quiet: bool) -> Renders {
+    let cam = &cfg.camera;
+    let l = cfg.light.direction();
+    let pb = crate::progress::bar(cfg.radii_mm.len() as u64, "path tracing", quiet);
+    let mut renders = Vec::new();
+    for (k, &r) in cfg.radii_mm.iter().enumerate() {
+        let scene = Scene {
+            sphere: Sphere::new(centre, r),
+            light: l,
+            medium: cfg.medium,
+            boundary: Boundary {
+                eta: cfg.eta,
+                alpha: cfg.alpha,
+            },
+        };
+        let t0 = std::time::Instant::now();
+        let img = render(cam, &scene, cfg.spp, cfg.seed, k as u64);
+        let mean = img.mean();
+        renders.push((r, img, mean, t0.elapsed().as_secs_f64()));
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    renders
+}
+
+/// Radiance → pixel values: the 99.97th percentile of the subsurface radiance over all photos
+/// at 0.6 of full scale.
+fn exposure_scale(renders: &Renders) -> Result<f64> {
+    let subsurface: Vec<f64> = renders
+        .iter()
+        .flat_map(|(_, img, mean, _)| {
+            mean.iter()
+                .zip(&img.specular)
+                .filter(|(v, _)| v.iter().any(|c| *c > 0.0))
+                .flat_map(|(v, s)| v.map(|c| c - s))
+        })
+        .collect();
+    let reference = percentile(subsurface, 0.9997);
+    if !(reference > 0.0) {
+        return Err(Error::Argument(
+            "the render is black: is the light behind the spheres?".into(),
+        ));
+    }
+    Ok(0.6 / reference)
+}
+
+/// One photo written (16-bit linear), with what is true of it: its noise (from the two half
+/// renders), its clipped pixels, the render's statistics.
+fn write_photo(
+    cfg: &PbrConfig,
+    out: &Path,
+    centre: Vector3<f64>,
+    scale: f64,
+    (r, img, mean, secs): (f64, &Rendered, &[[f64; 3]], f64),
+) -> Result<(PathBuf, TruthPhoto)> {
+    let file = if r.fract() == 0.0 {
+        format!("r{r:.0}.png")
+    } else {
+        format!("r{r}.png")
+    };
+    let q: Vec<u16> = mean
+        .iter()
+        .flat_map(|v| v.map(|c| ((c * scale).clamp(0.0, 1.0) * 65535.0).round() as u16))
+        .collect();
+    let saturated = mean
+        .iter()
+        .filter(|v| v.iter().any(|c| c * scale >= 1.0))
+        .count();
+    let lum: Vec<f64> = mean
+        .iter()
+        .zip(&img.specular)
+        .map(|(v, s)| (v[0] + v[1] + v[2]) / 3.0 - s)
+        .collect();
+    let p99 = percentile(lum.iter().cloned().filter(|v| *v > 0.0).collect(), 0.99);
+    let rel: Vec<f64> = (0..mean.len())
+        .filter(|&i| lum[i] > 0.1 * p99)
+        .map(|i| {
+            let (a, b) = (&img.halves[0][i], &img.halves[1][i]);
+            let m = (0..3).map(|c| 0.5 * (a[c] + b[c])).sum::<f64>();
+            let d = 0.5 * (0..3).map(|c| a[c] - b[c]).sum::<f64>().abs();
+            d / m
+        })
+        .collect();
+    // (a − b)/2 has the standard deviation of the mean (a + b)/2; the median of |N(0, s²)|
+    // is 0.6745 s.
+    let noise = (percentile(rel, 0.5) / 0.6745).max(0.0); // no lit pixel: 0
+    let path = out.join(&file);
+    photo::write_png16_rgb(&path, img.width as u32, img.height as u32, &q)?;
+    let photo = TruthPhoto {
+        file,
+        radius_mm: r,
+        centre_mm: [centre.x, centre.y, centre.z],
+        noise_rel_median_lit: noise,
+        saturated_pixels: saturated,
+        spp: cfg.spp,
+        pixels_traced: img.pixels_traced,
+        mean_scatterings_per_path: img.mean_scatterings,
+        render_time_s: secs,
+    };
+    Ok((path, photo))
+}
+
+/// Everything true of the session: the light, the material, the irradiance in the photos'
+/// units, the camera, each photo, the renderer.
+fn pbr_truth(cfg: &PbrConfig, scale: f64, photos: Vec<TruthPhoto>) -> PbrTruth {
+    let l = cfg.light.direction();
+    PbrTruth {
         schema: TRUTH_SCHEMA.into(),
         what: "volumetric path tracing of a homogeneous medium in a rough dielectric sphere under \
                one directional light (workbench synth pbr); there is no true σ0"
@@ -567,14 +606,12 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
             diffusion_length_mm_rgb: cfg.medium.diffusion_length_mm(),
         },
         irradiance_in_png_units: scale,
-        intrinsics: IntrinsicsFile::from_truth(cam),
+        intrinsics: IntrinsicsFile::from_truth(&cfg.camera),
         images: photos,
         renderer: format!(
             "workbench {} synth pbr: NEE through the rough boundary (GGX lobe {LOBE_PROBABILITY} + \
              uniform), Russian roulette after {ROULETTE_AFTER} scatterings",
             env!("CARGO_PKG_VERSION")
         ),
-    };
-    write_json(&out.join("truth.json"), &truth)?;
-    Ok(PbrOutput { images, truth })
+    }
 }
