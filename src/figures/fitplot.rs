@@ -619,51 +619,10 @@ fn holdout(fit: &FitFile, g: &Group) -> Figure {
     }
 }
 
-/// Every figure of a fit (not yet written).
+/// Every figure of a fit (not yet written): radiance and residuals against θ and φ, the
+/// correlation, the holdout, a residual image per sphere.
 pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
-    let held = |r: f64| {
-        fit.holdout
-            .as_ref()
-            .is_some_and(|h| (h.radius_mm - r).abs() < 1e-9)
-    };
-    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
-    radii.sort_by(|a, b| b.total_cmp(a));
-    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-    let model = fit.model();
-    let groups: Vec<Group> = radii
-        .iter()
-        .enumerate()
-        .map(|(k, &r)| {
-            let p = fit.params_for(r);
-            let b = fit.baseline.as_ref().map(|b| b.params_for(r));
-            let spheres: Vec<Evaluated> = spheres
-                .iter()
-                .filter(|s| (s.radius_mm - r).abs() < 1e-9)
-                .map(|s| evaluate(s, &model, &p, b.as_ref()))
-                .collect();
-            let peak = std::array::from_fn(|c| {
-                let v = percentile(
-                    spheres
-                        .iter()
-                        .flat_map(|e| e.data.iter().map(|d| d[c]))
-                        .collect(),
-                    0.995,
-                );
-                if v.is_finite() && v > 0.0 {
-                    v
-                } else {
-                    1.0
-                }
-            });
-            Group {
-                radius_mm: r,
-                held_out: held(r),
-                color: PALETTE[k % (PALETTE.len() - 1)],
-                spheres,
-                peak,
-            }
-        })
-        .collect();
+    let groups = groups(fit, spheres);
     let fitted = match fit.method {
         crate::formats::fit::Method::Joint => "joint fit",
         crate::formats::fit::Method::Paper => "paper's fit per radius",
@@ -710,34 +669,86 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
             figure: holdout(fit, g),
         });
     }
-    for g in &groups {
-        for e in &g.spheres {
-            if let Some(f) = residual_image(g, e) {
-                let stem = Path::new(&e.sphere.image)
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().to_string())
-                    .unwrap_or_default();
-                let stem: String = stem
-                    .chars()
-                    .map(|c| {
-                        if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                            c
-                        } else {
-                            '_'
-                        }
-                    })
-                    .collect();
-                out.push(Named {
-                    name: format!("residual-{stem}-{}", e.sphere.index + 1),
-                    caption: format!(
-                        "{}, sphere {} (r = {} mm): the photo and data − model per pixel block.",
-                        e.sphere.image,
-                        e.sphere.index + 1,
-                        e.sphere.radius_mm
-                    ),
-                    figure: f,
-                });
+    out.extend(groups.iter().flat_map(residual_images));
+    out
+}
+
+/// The spheres by radius, largest first, each evaluated under the fit (and the baseline).
+fn groups<'a>(fit: &FitFile, spheres: &'a [SphereData]) -> Vec<Group<'a>> {
+    let held = |r: f64| {
+        fit.holdout
+            .as_ref()
+            .is_some_and(|h| (h.radius_mm - r).abs() < 1e-9)
+    };
+    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
+    radii.sort_by(|a, b| b.total_cmp(a));
+    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let model = fit.model();
+    radii
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| {
+            let p = fit.params_for(r);
+            let b = fit.baseline.as_ref().map(|b| b.params_for(r));
+            let spheres: Vec<Evaluated> = spheres
+                .iter()
+                .filter(|s| (s.radius_mm - r).abs() < 1e-9)
+                .map(|s| evaluate(s, &model, &p, b.as_ref()))
+                .collect();
+            let peak = std::array::from_fn(|c| {
+                let v = percentile(
+                    spheres
+                        .iter()
+                        .flat_map(|e| e.data.iter().map(|d| d[c]))
+                        .collect(),
+                    0.995,
+                );
+                if v.is_finite() && v > 0.0 {
+                    v
+                } else {
+                    1.0
+                }
+            });
+            Group {
+                radius_mm: r,
+                held_out: held(r),
+                color: PALETTE[k % (PALETTE.len() - 1)],
+                spheres,
+                peak,
             }
+        })
+        .collect()
+}
+
+/// The residual image of each sphere of a group.
+fn residual_images(g: &Group) -> Vec<Named> {
+    let mut out = vec![];
+    for e in &g.spheres {
+        if let Some(f) = residual_image(g, e) {
+            let stem = Path::new(&e.sphere.image)
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_default();
+            let stem: String = stem
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            out.push(Named {
+                name: format!("residual-{stem}-{}", e.sphere.index + 1),
+                caption: format!(
+                    "{}, sphere {} (r = {} mm): the photo and data − model per pixel block.",
+                    e.sphere.image,
+                    e.sphere.index + 1,
+                    e.sphere.radius_mm
+                ),
+                figure: f,
+            });
         }
     }
     out
