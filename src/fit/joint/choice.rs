@@ -87,16 +87,37 @@ pub(crate) fn choose_extensions(
             ((d / o.max(1.0)).sqrt(), jf.fit.converged)
         })
         .collect();
-    // `pairs` runs candidate by candidate: each candidate's refits are one chunk.
-    let results: Vec<Candidate> = candidates
+    let results = candidate_results(&candidates, &refits, radii.len());
+    let (chosen, reason) = pick(&candidates, &results);
+    let mc = ModelChoice {
+        candidates: results,
+        chosen: chosen.name(),
+        reason,
+    };
+    (mc, chosen)
+}
+
+/// Each candidate's mean held-out error over the radii (`refits` run candidate by candidate:
+/// each candidate's refits are one chunk of `n` radii) and whether all its refits converged.
+fn candidate_results(
+    candidates: &[Extensions],
+    refits: &[(f64, bool)],
+    n: usize,
+) -> Vec<Candidate> {
+    candidates
         .iter()
-        .zip(refits.chunks(radii.len()))
+        .zip(refits.chunks(n))
         .map(|(ext, mine)| Candidate {
             extensions: ext.name(),
-            heldout_rel_rmse: mine.iter().map(|r| r.0).sum::<f64>() / radii.len() as f64,
+            heldout_rel_rmse: mine.iter().map(|r| r.0).sum::<f64>() / n as f64,
             converged: mine.iter().all(|r| r.1),
         })
-        .collect();
+        .collect()
+}
+
+/// The best candidate, or the simplest within 1% of the best's error, if it beats the plain
+/// model by more than 2%; the plain model otherwise. Returns it and why.
+fn pick(candidates: &[Extensions], results: &[Candidate]) -> (Extensions, String) {
     let plain = results[0].heldout_rel_rmse;
     // The best, or the simplest candidate within 1% of the best's error (candidates are listed
     // simplest first, the single extensions before the pairs).
@@ -110,7 +131,7 @@ pub(crate) fn choose_extensions(
         .position(|c| c.converged && c.heldout_rel_rmse <= 1.01 * lowest)
         .unwrap_or(0);
     let best = &results[k];
-    let (chosen, reason) = if k != 0 && best.heldout_rel_rmse < 0.98 * plain {
+    if k != 0 && best.heldout_rel_rmse < 0.98 * plain {
         (
             candidates[k],
             format!(
@@ -126,11 +147,5 @@ pub(crate) fn choose_extensions(
                 plain, best.heldout_rel_rmse, best.extensions
             ),
         )
-    };
-    let mc = ModelChoice {
-        candidates: results,
-        chosen: chosen.name(),
-        reason,
-    };
-    (mc, chosen)
+    }
 }
