@@ -32,7 +32,15 @@ fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     workbench::calibrate::cv::set_threads(1);
     let tmp = tempfile::tempdir().unwrap();
+    synthetic(quick, tmp.path());
+    opencv_left(tmp.path());
+    if !quick {
+        large(tmp.path());
+    }
+}
 
+/// Synthetic checkerboards at four noise levels against their truth.
+fn synthetic(quick: bool, tmp: &Path) {
     println!("\n### Synthetic checkerboards (1280×960, 15 views, blur 0.7 px, vignetting 0.3, 8-bit PNG)\n");
     println!("| shot noise | read noise | seeds | fx err % | fy err % | cx err px | cy err px | k1 err | k2 err | RMS px |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
@@ -47,7 +55,7 @@ fn main() {
                 seed,
                 ..CheckerConfig::default()
             };
-            let d = tmp.path().join(format!("n{noise}-{seed}"));
+            let d = tmp.join(format!("n{noise}-{seed}"));
             let t = generate(&cfg, &d, true).unwrap().truth.intrinsics;
             let r = run(&opts(&d, &d, DetectorChoice::Auto), &OpenCvDetect, &OpenCv).unwrap();
             let c = r.calibration.camera;
@@ -74,7 +82,10 @@ fn main() {
     println!(
         "\n(worst over the seeds; truth fx = fy = 1400, cx 643.2, cy 478.5, k1 −0.12, k2 0.08)"
     );
+}
 
+/// OpenCV's sample photos, each detector, and cv2 from Python with the same flags.
+fn opencv_left(tmp: &Path) {
     let left = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/opencv-left");
     if left.is_dir() {
         println!("\n### OpenCV's sample photos (opencv-left, 13 views 640×480), same run\n");
@@ -85,9 +96,7 @@ fn main() {
             ("workbench, auto (default)", DetectorChoice::Auto),
             ("workbench, both detectors", DetectorChoice::Both),
         ] {
-            let out = tmp
-                .path()
-                .join(format!("left-{name}").replace([' ', ','], "_"));
+            let out = tmp.join(format!("left-{name}").replace([' ', ','], "_"));
             let t0 = Instant::now();
             let r = run(&opts(&left, &out, det), &OpenCvDetect, &OpenCv).unwrap();
             let dt = t0.elapsed().as_secs_f64();
@@ -123,40 +132,41 @@ fn main() {
             left.display()
         );
     }
+}
 
-    if !quick {
-        println!("\n### 20 views of 24 MP (6000×4000), synthetic\n");
-        let mut cam = default_camera();
-        let s = 6000.0 / 1280.0;
-        cam.fx *= s;
-        cam.fy *= s;
-        cam.cx = 3001.5;
-        cam.cy = 1998.0;
-        cam.image_size = [6000, 4000];
-        let cfg = CheckerConfig {
-            camera: cam,
-            views: 20,
-            blur_px: 1.5,
-            ..CheckerConfig::default()
-        };
-        let d = tmp.path().join("24mp");
-        let t0 = Instant::now();
-        let truth = generate(&cfg, &d, true).unwrap().truth.intrinsics;
-        let gen = t0.elapsed().as_secs_f64();
-        let t0 = Instant::now();
-        let r = run(&opts(&d, &d, DetectorChoice::Auto), &OpenCvDetect, &OpenCv).unwrap();
-        let total = t0.elapsed().as_secs_f64();
-        let c = r.calibration.camera;
-        println!("| views used | decode + detect s | calibrate s (model choice, CV, std) | total s | fx err % | cx err px | RMS px | (rendering the views: {gen:.0} s) |");
-        println!("|---|---|---|---|---|---|---|---|");
-        println!(
-            "| {} | {:.2} | {:.2} | {total:.2} | {:+.3} | {:+.2} | {:.3} | |",
-            r.calibration.used.len(),
-            r.detection_s,
-            r.calibration_s,
-            100.0 * (c.fx / truth.fx - 1.0),
-            c.cx - truth.cx,
-            r.calibration.rms_px
-        );
-    }
+/// 20 views of 24 MP: the time of each step.
+fn large(tmp: &Path) {
+    println!("\n### 20 views of 24 MP (6000×4000), synthetic\n");
+    let mut cam = default_camera();
+    let s = 6000.0 / 1280.0;
+    cam.fx *= s;
+    cam.fy *= s;
+    cam.cx = 3001.5;
+    cam.cy = 1998.0;
+    cam.image_size = [6000, 4000];
+    let cfg = CheckerConfig {
+        camera: cam,
+        views: 20,
+        blur_px: 1.5,
+        ..CheckerConfig::default()
+    };
+    let d = tmp.join("24mp");
+    let t0 = Instant::now();
+    let truth = generate(&cfg, &d, true).unwrap().truth.intrinsics;
+    let gen = t0.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let r = run(&opts(&d, &d, DetectorChoice::Auto), &OpenCvDetect, &OpenCv).unwrap();
+    let total = t0.elapsed().as_secs_f64();
+    let c = r.calibration.camera;
+    println!("| views used | decode + detect s | calibrate s (model choice, CV, std) | total s | fx err % | cx err px | RMS px | (rendering the views: {gen:.0} s) |");
+    println!("|---|---|---|---|---|---|---|---|");
+    println!(
+        "| {} | {:.2} | {:.2} | {total:.2} | {:+.3} | {:+.2} | {:.3} | |",
+        r.calibration.used.len(),
+        r.detection_s,
+        r.calibration_s,
+        100.0 * (c.fx / truth.fx - 1.0),
+        c.cx - truth.cx,
+        r.calibration.rms_px
+    );
 }

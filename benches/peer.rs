@@ -45,24 +45,7 @@ fn main() {
         })
         .cloned()
         .collect();
-    // The same start for both: the fit moved off (σ0 ×1.3, albedo ×0.8, η 1.45, the light 1°).
-    let mut v = fit_params.to_vec();
-    for c in 0..3 {
-        v[idx::SIGMA0 + c] *= 1.3;
-        v[idx::ALBEDO + c] *= 0.8;
-    }
-    v[idx::ETA] = 1.45;
-    v[idx::KS] = 0.0;
-    v[idx::AZIMUTH] += 1f64.to_radians();
-    v[idx::ELEVATION] -= 1f64.to_radians();
-    for k in [
-        idx::SIGMA_EXPONENT,
-        idx::ALBEDO_CURVATURE,
-        idx::KERNEL_WEIGHT,
-        idx::KERNEL_RATIO,
-    ] {
-        v[k] = 0.0;
-    }
+    let v = start_values(&fit_params);
     let start = Params::from_vec(&v);
     let mut free = [false; N_PARAMS];
     for k in (0..7).chain([idx::AZIMUTH, idx::ELEVATION]) {
@@ -96,7 +79,81 @@ fn main() {
             })
             .sum::<u32>()
     });
-    // SciPy on the same observations and start.
+    let (t_peer, peer, peer_v) = scipy(&dir, &obs, &v);
+    let ours = wb.params.to_vec();
+    println!(
+        "observations: {} pixels × 3 channels, 9 parameters (σ0, albedo, η, light), plain least squares",
+        obs.len()
+    );
+    println!("| solver | seconds | evaluations | ratio to workbench |");
+    println!("|---|---:|---:|---:|");
+    println!(
+        "| workbench (tabulated CDRF) | {t_wb:.3} | {} | 1 |",
+        wb.evaluations
+    );
+    println!(
+        "| workbench (closed-form CDRF) | {t_closed:.3} | | {:.1}× |",
+        t_closed / t_wb
+    );
+    println!(
+        "| SciPy {} least_squares trf | {t_peer:.3} | {} (+{} Jacobians) | {:.1}× |",
+        peer["scipy"].as_str().unwrap_or("?"),
+        peer["evaluations"],
+        peer["jacobians"],
+        t_peer / t_wb
+    );
+    println!(
+        "| decoding the {} photos | {t_decode:.3} | | {:.2}× |",
+        photos.len(),
+        t_decode / t_wb
+    );
+    println!(
+        "cost: workbench {:.6e}, SciPy {:.6e}",
+        wb.cost,
+        peer["cost"].as_f64().unwrap_or(f64::NAN)
+    );
+    let mut worst = (0.0f64, "");
+    for (k, val) in peer_v {
+        let d = (val - ours[k]).abs() / wb.std[k].max(1e-300);
+        if d > worst.0 {
+            worst = (d, PARAM_NAMES[k]);
+        }
+    }
+    println!(
+        "parameters: SciPy's within {:.2e} of workbench's standard errors ({})",
+        worst.0, worst.1
+    );
+}
+
+/// The same start for both: the fit moved off (σ0 ×1.3, albedo ×0.8, η 1.45, the light 1°).
+fn start_values(fit: &Params) -> [f64; N_PARAMS] {
+    let mut v = fit.to_vec();
+    for c in 0..3 {
+        v[idx::SIGMA0 + c] *= 1.3;
+        v[idx::ALBEDO + c] *= 0.8;
+    }
+    v[idx::ETA] = 1.45;
+    v[idx::KS] = 0.0;
+    v[idx::AZIMUTH] += 1f64.to_radians();
+    v[idx::ELEVATION] -= 1f64.to_radians();
+    for k in [
+        idx::SIGMA_EXPONENT,
+        idx::ALBEDO_CURVATURE,
+        idx::KERNEL_WEIGHT,
+        idx::KERNEL_RATIO,
+    ] {
+        v[k] = 0.0;
+    }
+    v
+}
+
+/// SciPy on the same observations and start (`benches/scipy_peer.py`): its seconds, its JSON
+/// line, and its parameters by model index.
+fn scipy(
+    dir: &Path,
+    obs: &[Obs],
+    v: &[f64; N_PARAMS],
+) -> (f64, serde_json::Value, Vec<(usize, f64)>) {
     let rows: Vec<[f64; 13]> = obs
         .iter()
         .map(|o| {
@@ -163,47 +220,5 @@ fn main() {
             (idx::ELEVATION, x[8]),
         ])
         .collect();
-    let ours = wb.params.to_vec();
-    println!(
-        "observations: {} pixels × 3 channels, 9 parameters (σ0, albedo, η, light), plain least squares",
-        obs.len()
-    );
-    println!("| solver | seconds | evaluations | ratio to workbench |");
-    println!("|---|---:|---:|---:|");
-    println!(
-        "| workbench (tabulated CDRF) | {t_wb:.3} | {} | 1 |",
-        wb.evaluations
-    );
-    println!(
-        "| workbench (closed-form CDRF) | {t_closed:.3} | | {:.1}× |",
-        t_closed / t_wb
-    );
-    println!(
-        "| SciPy {} least_squares trf | {t_peer:.3} | {} (+{} Jacobians) | {:.1}× |",
-        peer["scipy"].as_str().unwrap_or("?"),
-        peer["evaluations"],
-        peer["jacobians"],
-        t_peer / t_wb
-    );
-    println!(
-        "| decoding the {} photos | {t_decode:.3} | | {:.2}× |",
-        photos.len(),
-        t_decode / t_wb
-    );
-    println!(
-        "cost: workbench {:.6e}, SciPy {:.6e}",
-        wb.cost,
-        peer["cost"].as_f64().unwrap_or(f64::NAN)
-    );
-    let mut worst = (0.0f64, "");
-    for (k, val) in peer_v {
-        let d = (val - ours[k]).abs() / wb.std[k].max(1e-300);
-        if d > worst.0 {
-            worst = (d, PARAM_NAMES[k]);
-        }
-    }
-    println!(
-        "parameters: SciPy's within {:.2e} of workbench's standard errors ({})",
-        worst.0, worst.1
-    );
+    (t_peer, peer, peer_v)
 }

@@ -156,7 +156,7 @@ impl Pen {
         // kept inside the frame.
         let text_w = (text.chars().count() as f64 * font_px * 0.55) as i32;
         let x = (cx - text_w / 2).clamp(4, (w as i32 - text_w - 4).max(4));
-        let y = if idx % 2 == 0 {
+        let y = if idx.is_multiple_of(2) {
             cy + (r * 1.05) as i32 + 4
         } else {
             cy - (r * 1.05) as i32 - font_px as i32 - 4

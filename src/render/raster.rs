@@ -455,8 +455,8 @@ impl Bands<'_> {
                     let c = shade_at(
                         scene,
                         shader,
-                        &t_table,
-                        &l,
+                        t_table,
+                        l,
                         s,
                         &scene.triangles[t as usize],
                         qx,

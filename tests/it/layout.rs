@@ -582,3 +582,92 @@ fn the_cycle_finder_sees_globs_reexports_and_folders() {
     let c = cycles_of(&sibling_edges(&e));
     assert_eq!(c, vec![vec![vec!["p".to_string()], vec!["q".to_string()]]]);
 }
+
+/// Functions longer than `max` lines in the Rust files under `dir` (their tests left out: a
+/// file is read up to its first `#[cfg(test)]`), as "file:line name (lines)". A function runs
+/// from its `fn` line to the first line that closes it at the same indentation.
+fn long_functions(dir: &Path, max: usize) -> Vec<String> {
+    let mut files = vec![];
+    rust_files(dir, &mut files);
+    let mut long = vec![];
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let lines: Vec<&str> = text
+            .lines()
+            .take_while(|l| !l.starts_with("#[cfg(test)]"))
+            .collect();
+        let mut i = 0;
+        while i < lines.len() {
+            let l = lines[i];
+            let code = l.trim_start();
+            let indent = &l[..l.len() - code.len()];
+            let rest = ["pub(crate) ", "pub(super) ", "pub "]
+                .iter()
+                .find_map(|p| code.strip_prefix(p))
+                .unwrap_or(code);
+            let rest = rest.strip_prefix("const ").unwrap_or(rest);
+            let Some(name) = rest.strip_prefix("fn ") else {
+                i += 1;
+                continue;
+            };
+            let name: String = name
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            // The signature ends at its body's `{` or, for a declaration, at `;`.
+            let mut j = i;
+            while j < lines.len() && !lines[j].ends_with('{') && !lines[j].ends_with(';') {
+                j += 1;
+            }
+            if j >= lines.len() || lines[j].ends_with(';') {
+                i = j + 1;
+                continue;
+            }
+            let close = format!("{indent}}}");
+            let end = (j + 1..lines.len())
+                .find(|&k| lines[k] == close)
+                .unwrap_or(lines.len() - 1);
+            let n = end - i + 1;
+            if n > max {
+                long.push(format!("{}:{} {name} ({n} lines)", f.display(), i + 1));
+            }
+            i = end + 1;
+        }
+    }
+    long
+}
+
+#[test]
+fn no_function_is_longer_than_120_lines() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut long = long_functions(&root.join("src"), 120);
+    long.extend(long_functions(&root.join("benches"), 120));
+    assert!(
+        long.is_empty(),
+        "functions over 120 lines (split them into named steps): {long:#?}"
+    );
+}
+
+#[test]
+fn the_length_check_measures_functions() {
+    let dir = tree(&[(
+        "a.rs",
+        "fn short() {\n    1;\n}\n\npub(crate) fn long(\n    x: u32,\n) -> u32 {\n    x\n        + 1\n}\n\n#[cfg(test)]\nfn in_tests() {\n    2;\n    3;\n    4;\n}\n",
+    )]);
+    // `long` spans 6 lines, `short` 3; what follows #[cfg(test)] is not read.
+    assert_eq!(
+        long_functions(dir.path(), 2),
+        vec![
+            format!("{}:1 short (3 lines)", dir.path().join("a.rs").display()),
+            format!("{}:5 long (6 lines)", dir.path().join("a.rs").display()),
+        ]
+    );
+    assert_eq!(
+        long_functions(dir.path(), 5),
+        vec![format!(
+            "{}:5 long (6 lines)",
+            dir.path().join("a.rs").display()
+        )]
+    );
+    assert!(long_functions(dir.path(), 6).is_empty());
+}
