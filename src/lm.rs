@@ -1,6 +1,6 @@
-//! The one small Levenberg–Marquardt step of the detector's dense fits (the silhouette's edge
-//! model, the highlight's lobe): the normal equations JᵀJ δ = −Jᵀr damped by (1 + λ) on the
-//! diagonal, the step handed to the caller, which maps it to a trial point (bounds, step limits)
+//! The one small Levenberg–Marquardt step of the detector's dense fits (the outline through edge
+//! points, the silhouette's edge model, the highlight's lobe): the normal equations
+//! JᵀJ δ = −Jᵀr damped by (1 + λ) on the diagonal, the step handed to the caller, which maps it to a trial point (bounds, step limits)
 //! and evaluates its cost; a lower cost is accepted and λ shrinks by 0.3 (down to `lambda_min`),
 //! anything else raises λ tenfold and tries again, `tries` times at most.
 //!

@@ -228,6 +228,46 @@ impl Outline {
         }
     }
 
+    /// ∂s/∂d at d = 0 for a point `q`: how the normalised distance [`Outline::s`] of `q`
+    /// changes as the outline is [`moved`](Outline::moved) by `d` (`None` where s is not
+    /// smooth: `q` on the axis or behind the camera, or at the circle's centre).
+    pub(crate) fn ds_dmove(&self, q: &Vector3<f64>) -> Option<Vector3<f64>> {
+        match self {
+            Outline::Cone { axis, half_angle } => {
+                if q.dot(axis) <= 0.0 {
+                    return None;
+                }
+                // s = |q × a′| / sin h with a′ = normalize(a + e1 dx + e2 dy), h = α + dz: at
+                // d = 0, ∂a′/∂dx = e1 (e1 ⊥ a), so ∂|q × a′|/∂dx = (q × a)·(q × e1) / |q × a|.
+                let (e1, e2) = tangent_basis(axis);
+                let qa = q.cross(axis);
+                let sin_b = qa.norm();
+                if sin_b == 0.0 {
+                    return None;
+                }
+                let sh = half_angle.sin();
+                Some(Vector3::new(
+                    qa.dot(&q.cross(&e1)) / (sin_b * sh),
+                    qa.dot(&q.cross(&e2)) / (sin_b * sh),
+                    -sin_b * half_angle.cos() / (sh * sh),
+                ))
+            }
+            Outline::Circle { center, radius } => {
+                // s = |q.xy − c − d.xy| / (ρ + dz).
+                let v = q.xy() - center;
+                let n = v.norm();
+                if n == 0.0 {
+                    return None;
+                }
+                Some(Vector3::new(
+                    -v.x / (n * radius),
+                    -v.y / (n * radius),
+                    -n / (radius * radius),
+                ))
+            }
+        }
+    }
+
     /// The size of one pixel in the units of [`Outline::moved`].
     pub(crate) fn pixel_unit(&self, proj: &Projection) -> f64 {
         match self {
@@ -369,5 +409,52 @@ mod tests {
             }),
             Some(true)
         );
+    }
+
+    /// The analytic ∂s/∂d against central differences of s along each move, for a cone and a
+    /// circle, at points inside, on and outside the rim.
+    #[test]
+    fn ds_dmove_matches_finite_differences() {
+        let cam = crate::camera::Camera::example();
+        let proj = Projection::Perspective(cam);
+        let cone =
+            Outline::of_sphere(&Sphere::new(Vector3::new(60.0, -40.0, 500.0), 30.0)).unwrap();
+        let circle = Outline::Circle {
+            center: Vector2::new(300.0, 200.0),
+            radius: 70.0,
+        };
+        let points = |o: &Outline| -> Vec<Vector3<f64>> {
+            let mut v = vec![];
+            for (k, q) in o.rim(7).into_iter().enumerate() {
+                // The rim point scaled about the centre: inside, on and outside.
+                for f in [0.6, 1.0, 1.3] {
+                    let c = o.center_point();
+                    let p = c + (q - c) * f;
+                    v.push(if k % 2 == 0 {
+                        p
+                    } else {
+                        p.normalize() * p.norm()
+                    });
+                }
+            }
+            v
+        };
+        for (o, unit) in [(cone, cone.pixel_unit(&proj)), (circle, 1.0)] {
+            for q in points(&o) {
+                let g = o.ds_dmove(&q).expect("smooth away from the axis");
+                for c in 0..3 {
+                    let h = 1e-4 * unit;
+                    let mut d = Vector3::zeros();
+                    d[c] = h;
+                    let fd = (o.moved(&d).s(&q) - o.moved(&-d).s(&q)) / (2.0 * h);
+                    let tol = 1e-6 * fd.abs().max(g.norm());
+                    assert!(
+                        (g[c] - fd).abs() < tol,
+                        "{o:?} q {q:?} ∂{c}: {} vs {fd}",
+                        g[c]
+                    );
+                }
+            }
+        }
     }
 }

@@ -158,38 +158,51 @@ fn inward(o: &Outline, proj: &Projection, e: &EdgePoint, cos_tol: f64) -> bool {
     e.dir.dot(&to_c) > cos_tol
 }
 
-/// Gauss–Newton on the pixel distances of points from an outline (finite-difference Jacobian in
-/// the outline's own parameters).
+/// The outline nearest points in pixel distance (least squares): Levenberg–Marquardt
+/// ([`crate::lm`]) over the outline's own parameters ([`Outline::moved`]), with the analytic
+/// Jacobian ([`Outline::ds_dmove`]). Points where the distance is not smooth are left out.
 pub(crate) fn least_squares(o: &Outline, proj: &Projection, pts: &[Vector3<f64>]) -> Outline {
     let mut o = *o;
+    let cost_of = |o: &Outline, r_px: f64| -> f64 {
+        pts.iter()
+            .map(|q| distance_px(o, q, r_px).powi(2))
+            .filter(|c| c.is_finite())
+            .sum()
+    };
+    let mut lm = crate::lm::Lm {
+        lambda: 1e-6,
+        lambda_min: 1e-12,
+        tries: 10,
+        tiny: 1e-300,
+    };
     for _ in 0..30 {
         let r_px = o.radius_px(proj);
-        let h = 1e-3 * o.pixel_unit(proj);
-        let res: Vec<f64> = pts.iter().map(|q| distance_px(&o, q, r_px)).collect();
         let mut jtj = Matrix3::zeros();
         let mut jtr = Vector3::zeros();
-        let moved: Vec<(Outline, Outline)> = (0..3)
-            .map(|c| {
-                let mut d = Vector3::zeros();
-                d[c] = h;
-                (o.moved(&d), o.moved(&-d))
-            })
-            .collect();
-        for (k, q) in pts.iter().enumerate() {
-            let j = Vector3::from_fn(|c, _| {
-                (distance_px(&moved[c].0, q, r_px) - distance_px(&moved[c].1, q, r_px)) / (2.0 * h)
-            });
-            jtj += j * j.transpose();
-            jtr += j * res[k];
+        for q in pts {
+            let r = distance_px(&o, q, r_px);
+            let Some(j) = o.ds_dmove(q).map(|g| g * r_px) else {
+                continue;
+            };
+            if r.is_finite() {
+                jtj += j * j.transpose();
+                jtr += j * r;
+            }
         }
-        let Some(step) = jtj.try_inverse().map(|m| -(m * jtr)) else {
+        let cost = cost_of(&o, r_px);
+        let unit = o.pixel_unit(proj);
+        let accepted = lm.step(&jtj, &jtr, cost, |step| {
+            if !step.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            let next = o.moved(step);
+            Some((cost_of(&next, r_px), (next, step.norm() < 1e-9 * unit)))
+        });
+        let Some((_, (next, small))) = accepted else {
             break;
         };
-        if !step.iter().all(|v| v.is_finite()) {
-            break;
-        }
-        o = o.moved(&step);
-        if step.norm() < 1e-9 * o.pixel_unit(proj) {
+        o = next;
+        if small {
             break;
         }
     }
