@@ -1,13 +1,12 @@
 //! The checks on a joint fit's result, each a note (and a status) rather than a silent number:
-//! clipped pixels, a degenerate covariance, residuals beyond the measured noise, a light beside
+//! clipped pixels, residuals beyond the measured noise, a light beside
 //! the camera, η against its prior, and η from the highlight alone against the whole fit's.
 
 use super::settings::Setup;
 use crate::fit::observe::SphereData;
 use crate::fit::reduce::Pooled;
 use crate::fit::solver::{self, Fit};
-use crate::formats::fit::Stage;
-use crate::model::{idx, N_PARAMS, PARAM_NAMES};
+use crate::model::{idx, N_PARAMS};
 use nalgebra::Vector3;
 
 /// A light closer than this to the viewing direction (degrees) gets a note: θ ≈ φ.
@@ -18,33 +17,6 @@ pub(crate) const CHI2_WARN: f64 = 4.0;
 
 /// Above this fraction of clipped sphere pixels the fit warns.
 pub(crate) const CLIPPED_WARN: f64 = 0.5;
-
-/// A fit whose core parameters have no finite standard error is degenerate, whatever the
-/// optimiser's stopping test said: not a measurement.
-pub(crate) fn degenerate_check(fit: Fit, stages: &mut [Stage], notes: &mut Vec<String>) -> Fit {
-    let mut fit = fit;
-    let core = (0..6).chain([idx::AZIMUTH, idx::ELEVATION]);
-    let singular: Vec<&str> = core
-        .filter(|&k| fit.free[k] && !fit.std[k].is_finite())
-        .map(|k| PARAM_NAMES[k])
-        .collect();
-    if !singular.is_empty() && fit.converged {
-        fit.converged = false;
-        fit.termination = format!(
-            "degenerate: no finite standard error for {}",
-            singular.join(", ")
-        );
-        if let Some(st) = stages.last_mut() {
-            st.converged = false;
-            st.termination = fit.termination.clone();
-        }
-        notes.push(format!(
-            "the fit is degenerate (the covariance is singular for {}): the result is not a measurement — check the detections and the photos' noise and exposure",
-            singular.join(", ")
-        ));
-    }
-    fit
-}
 
 /// With the irradiance given, η is measured by the highlight's height — and, through the
 /// transmissions, by the diffuse shading, the least exact part of the model. η (and α) refitted

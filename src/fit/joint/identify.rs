@@ -1,13 +1,14 @@
 //! Identifiability: which parameters the full fit frees (the lobe, η on its prior unless the
 //! irradiance is given, the extensions that 3 radii at least can test), which of them the data
 //! leave undetermined and how each is then held ([`hold`]), σ0 at the edges of what the data
-//! resolve (a bound, not a measurement), and how far a prior and the data disagree
-//! ([`prior_tension`]).
+//! resolve (a bound, not a measurement), a fit with a singular covariance marked degenerate
+//! ([`degenerate_check`]), and how far a prior and the data disagree ([`prior_tension`]).
 
 use super::settings::{Extensions, Setup, ALPHA_PRIOR};
 use super::start;
 use crate::fit::observe::{self, SphereData};
 use crate::fit::solver::{self, Fit, Obs, Prior};
+use crate::formats::fit::Stage;
 use crate::model::{idx, Model, Params, N_PARAMS, PARAM_NAMES};
 
 /// The parameters of the full fit and their priors: the lobe, η (on its prior unless the
@@ -307,6 +308,33 @@ fn resolution_limits(
             ))
         })
         .collect()
+}
+
+/// A fit whose core parameters have no finite standard error is degenerate, whatever the
+/// optimiser's stopping test said: not a measurement.
+pub(crate) fn degenerate_check(fit: Fit, stages: &mut [Stage], notes: &mut Vec<String>) -> Fit {
+    let mut fit = fit;
+    let core = (0..6).chain([idx::AZIMUTH, idx::ELEVATION]);
+    let singular: Vec<&str> = core
+        .filter(|&k| fit.free[k] && !fit.std[k].is_finite())
+        .map(|k| PARAM_NAMES[k])
+        .collect();
+    if !singular.is_empty() && fit.converged {
+        fit.converged = false;
+        fit.termination = format!(
+            "degenerate: no finite standard error for {}",
+            singular.join(", ")
+        );
+        if let Some(st) = stages.last_mut() {
+            st.converged = false;
+            st.termination = fit.termination.clone();
+        }
+        notes.push(format!(
+            "the fit is degenerate (the covariance is singular for {}): the result is not a measurement — check the detections and the photos' noise and exposure",
+            singular.join(", ")
+        ));
+    }
+    fit
 }
 
 /// Free parameters the data leave undetermined: a standard error that is not finite, or larger

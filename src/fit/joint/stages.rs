@@ -4,9 +4,10 @@
 //! not determine held ([`super::identify`]); the phases before and the checks after come from the
 //! folder's other files.
 
-use super::checks::{self, degenerate_check, eta_from_highlight, fit_notes};
+use super::checks::{self, eta_from_highlight, fit_notes};
 use super::identify::{
-    hold, parameter_set, poorly_determined, prior_tension, resolution_notes, Round,
+    degenerate_check, hold, parameter_set, poorly_determined, prior_tension, resolution_notes,
+    Round,
 };
 use super::light::LightPrior;
 use super::reduction::{choose_reduction, HIGHLIGHT_KEEP, SHIFT_LIMIT};
