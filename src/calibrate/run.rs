@@ -106,7 +106,7 @@ struct Images {
 type Found = Option<Corners>;
 
 /// Per image: the classic and the sector-based detector's results, and a detector's error.
-struct Found2 {
+struct Detected {
     found: Vec<[Found; 2]>,
     errors: Vec<Option<String>>,
 }
@@ -255,7 +255,7 @@ fn pattern_of(opts: &Options, detect: &dyn Detect, images: &Images) -> Result<Pa
     ))
 }
 
-impl Found2 {
+impl Detected {
     /// One detector on the images `todo`, in parallel.
     fn pass(
         &mut self,
@@ -304,9 +304,9 @@ fn detect_corners(
     images: &Images,
     pattern: Pattern,
     object: &[nalgebra::Vector3<f64>],
-) -> Result<Found2> {
+) -> Result<Detected> {
     let n = images.list.len();
-    let mut f = Found2 {
+    let mut f = Detected {
         found: vec![[None, None]; n],
         errors: vec![None; n],
     };
@@ -375,7 +375,7 @@ fn detect_corners(
 }
 
 /// The images with corners by either detector; the others join `images.unusable`, with why.
-fn candidates(images: &mut Images, f: &Found2, pattern: Pattern) -> Vec<(String, [Corners; 2])> {
+fn candidates(images: &mut Images, f: &Detected, pattern: Pattern) -> Vec<(String, [Corners; 2])> {
     let mut candidates = vec![];
     for (i, (name, _, _)) in images.list.iter().enumerate() {
         let both = [

@@ -179,17 +179,18 @@ pub(crate) fn least_squares(o: &Outline, proj: &Projection, pts: &[Vector3<f64>]
         let r_px = o.radius_px(proj);
         let mut jtj = Matrix3::zeros();
         let mut jtr = Vector3::zeros();
+        let mut cost = 0.0;
         for q in pts {
             let r = distance_px(&o, q, r_px);
-            let Some(j) = o.ds_dmove(q).map(|g| g * r_px) else {
+            if !r.is_finite() {
                 continue;
-            };
-            if r.is_finite() {
+            }
+            cost += r * r;
+            if let Some(j) = o.ds_dmove(q).map(|g| g * r_px) {
                 jtj += j * j.transpose();
                 jtr += j * r;
             }
         }
-        let cost = cost_of(&o, r_px);
         let unit = o.pixel_unit(proj);
         let accepted = lm.step(&jtj, &jtr, cost, |step| {
             if !step.iter().all(|v| v.is_finite()) {

@@ -680,9 +680,8 @@ fn groups<'a>(fit: &FitFile, spheres: &'a [SphereData]) -> Vec<Group<'a>> {
             .as_ref()
             .is_some_and(|h| (h.radius_mm - r).abs() < 1e-9)
     };
-    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
-    radii.sort_by(|a, b| b.total_cmp(a));
-    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let mut radii = crate::fit::observe::distinct_radii(&spheres.iter().collect::<Vec<_>>());
+    radii.reverse();
     let model = fit.model();
     radii
         .iter()

@@ -104,9 +104,8 @@ pub fn fit(
         ..Model::default()
     };
     let angles = LightAngles::from_direction(light);
-    let mut radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
-    radii.sort_by(|a, b| b.total_cmp(a));
-    radii.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let mut radii = crate::fit::observe::distinct_radii(spheres);
+    radii.reverse();
     let mut per_radius = vec![];
     let mut converged = true;
     for &r in &radii {

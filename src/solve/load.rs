@@ -177,7 +177,7 @@ pub fn fingerprint(opts: &Options) -> String {
         f.jackknife,
         f.entry_transmission,
         if f.tabulated { "table" } else { "closed form" },
-        f.baseline || opts.plots.is_some()
+        opts.fit_settings().baseline
     )
 }
 

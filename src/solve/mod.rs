@@ -9,7 +9,7 @@
 //! prediction error, and figures.
 
 use crate::error::{Error, Result};
-use crate::fit::joint::{self, Settings};
+use crate::fit::joint;
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{FitFile, Method};
 use crate::formats::session;
@@ -64,10 +64,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
         match opts.method {
             Method::Joint => {
-                let settings = Settings {
-                    baseline: opts.fit.baseline || opts.plots.is_some(),
-                    ..opts.fit
-                };
+                let settings = opts.fit_settings();
                 Outcome::joint(joint::fit_session(
                     &settings,
                     &l.measured,

@@ -36,4 +36,13 @@ impl Options {
             fit: Settings::default(),
         }
     }
+
+    /// The settings the fit runs with: the paper's baseline also runs when figures are asked
+    /// for (its curves are drawn).
+    pub fn fit_settings(&self) -> Settings {
+        Settings {
+            baseline: self.fit.baseline || self.plots.is_some(),
+            ..self.fit
+        }
+    }
 }

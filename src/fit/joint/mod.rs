@@ -35,7 +35,6 @@ pub mod settings;
 pub mod stages;
 pub mod start;
 
-pub use crate::fit::predict::{predict, Prediction};
 pub use jackknife::{jackknife, Jackknife};
 pub use light::PULL_WARN;
 pub(crate) use reduction::SHIFT_LIMIT;
