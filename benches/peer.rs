@@ -29,7 +29,7 @@ fn main() {
     let _ = std::fs::remove_dir_all(&dir);
     session::generate(&SessionConfig::default(), &dir, None, true).expect("synthetic session");
     let mut o = Options::new(&dir);
-    o.fit.jackknife = false;
+    o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off;
     let fitted = solve::run(&o).expect("solve");
     let l = solve::load(&o).expect("load");
     let fit_params = fitted.params();

@@ -114,8 +114,14 @@ pub(crate) struct SolveArgs {
     /// Keep the light at the detector's estimate (or --start-light) instead of refining it.
     #[arg(long, conflicts_with = "free_light")]
     pub(crate) hold_light: bool,
-    /// Skip the leave-one-radius-out refits (the standard errors are then the formal ones).
-    #[arg(long)]
+    /// How the leave-one-radius-out jackknife's estimates are taken: Newton steps from the full
+    /// fit (linear, one pass over the observations), the fit repeated without each radius
+    /// (refit, the check of the linear one), or none (off: the standard errors are the formal
+    /// ones).
+    #[arg(long, value_enum, default_value_t = JackknifeArg::Linear)]
+    pub(crate) jackknife: JackknifeArg,
+    /// The same as --jackknife off.
+    #[arg(long, conflicts_with = "jackknife")]
     pub(crate) no_jackknife: bool,
     /// Refine the light from the shading alone, without the detector's light as a prior (the
     /// default uses it as one).
@@ -186,6 +192,13 @@ pub(crate) struct LutArgs {
     /// Rescale the mesh so its bounding sphere is this many mm across.
     #[arg(long, requires = "mesh")]
     pub(crate) object_size: Option<f64>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum JackknifeArg {
+    Linear,
+    Refit,
+    Off,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -5,6 +5,7 @@ use crate::cli::*;
 use anyhow::{bail, Context, Result};
 use std::fmt;
 use std::path::PathBuf;
+use workbench::fit::joint::JackknifeMethod;
 use workbench::formats::fit::FitFile;
 use workbench::model::LightAngles;
 
@@ -49,7 +50,11 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<Solved> {
     } else {
         workbench::fit::joint::LightFit::Prior
     };
-    o.fit.jackknife = !a.no_jackknife;
+    o.fit.jackknife = match (a.no_jackknife, a.jackknife) {
+        (true, _) | (_, JackknifeArg::Off) => JackknifeMethod::Off,
+        (_, JackknifeArg::Refit) => JackknifeMethod::Refit,
+        (_, JackknifeArg::Linear) => JackknifeMethod::Linear,
+    };
     o.fit.entry_transmission = a.entry_transmission;
     o.plots = a.plots.clone();
     o.fit.baseline = a.baseline;

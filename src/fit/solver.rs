@@ -228,13 +228,8 @@ impl ChunkSums {
         }
     }
 
-    /// Into the free parameters' JᵀJ (lower triangle), Jᵀr, rᵀr and floor sums.
-    fn scatter(
-        &self,
-        layout: &[Vec<(usize, usize)>; 3],
-        n: usize,
-        floor: bool,
-    ) -> (DMatrix<f64>, DVector<f64>, f64, FloorSums) {
+    /// Into the free parameters' raw normal equations (JᵀJ's lower triangle).
+    fn scatter(&self, layout: &[Vec<(usize, usize)>; 3], n: usize, floor: bool) -> RawNormal {
         let mut jtj = DMatrix::<f64>::zeros(n, n);
         let mut jtr = DVector::<f64>::zeros(n);
         let mut fs = FloorSums::zero(if floor { n } else { 0 });
@@ -251,7 +246,12 @@ impl ChunkSums {
             fs.ww[c] = self.ww[c];
             fs.wr[c] = self.wr[c];
         }
-        (jtj, jtr, self.rr, fs)
+        RawNormal {
+            jtj,
+            jtr,
+            rtr: self.rr,
+            floor: fs,
+        }
     }
 }
 
@@ -426,23 +426,80 @@ pub struct Normal {
     floor: Option<FloorSums>,
 }
 
+/// The normal equations of a set of observation rows before the dark floor is profiled out and
+/// before the priors: JᵀJ (full, symmetric), Jᵀr, rᵀr and the floor's sums. Sums of disjoint sets
+/// add ([`RawNormal::plus`]) and subtract ([`RawNormal::less`]): the normal equations of the
+/// observations less one group are the totals less the group's.
+#[derive(Clone, Debug)]
+pub struct RawNormal {
+    jtj: DMatrix<f64>,
+    jtr: DVector<f64>,
+    rtr: f64,
+    floor: FloorSums,
+}
+
+impl RawNormal {
+    /// The sums of all the parts.
+    pub fn sum(parts: &[RawNormal]) -> Option<RawNormal> {
+        let (first, rest) = parts.split_first()?;
+        Some(rest.iter().fold(first.clone(), |a, b| a.plus(b)))
+    }
+
+    fn zero(n: usize, floor: bool) -> RawNormal {
+        RawNormal {
+            jtj: DMatrix::zeros(n, n),
+            jtr: DVector::zeros(n),
+            rtr: 0.0,
+            floor: FloorSums::zero(if floor { n } else { 0 }),
+        }
+    }
+
+    /// The sums of both sets.
+    pub fn plus(mut self, o: &RawNormal) -> RawNormal {
+        self.jtj += &o.jtj;
+        self.jtr += &o.jtr;
+        self.rtr += o.rtr;
+        self.floor = self.floor.add(&o.floor);
+        self
+    }
+
+    /// The sums of this set without `o` (a subset of it).
+    pub fn less(&self, o: &RawNormal) -> RawNormal {
+        let mut floor = self.floor.clone();
+        for c in 0..3 {
+            floor.ww[c] -= o.floor.ww[c];
+            floor.wr[c] -= o.floor.wr[c];
+            if !floor.wg[c].is_empty() {
+                floor.wg[c] -= &o.floor.wg[c];
+            }
+        }
+        RawNormal {
+            jtj: &self.jtj - &o.jtj,
+            jtr: &self.jtr - &o.jtr,
+            rtr: self.rtr - o.rtr,
+            floor,
+        }
+    }
+}
+
 impl Problem<'_> {
     /// Accumulate the normal equations in parallel (chunks of observations), without forming J.
     pub fn normal_equations(&self) -> Normal {
+        let raw = self.grouped_sums(None).swap_remove(0);
+        self.profiled(&raw)
+    }
+
+    /// The raw normal equations ([`RawNormal`]) of each group of observations: `groups` gives
+    /// each observation's group (0..count); `None`, one group of all. One pass over the
+    /// observations, in parallel chunks, summed in chunk order (the same result on every run).
+    pub fn grouped_sums(&self, groups: Option<(&[usize], usize)>) -> Vec<RawNormal> {
         let (p, dpdu) = from_unbounded(&self.u);
         let params = Params::from_vec(&p);
         let frame = params.light.frame();
         let free = self.free_idx();
         let n = free.len();
         let floor = self.floor;
-        let zero = || {
-            (
-                DMatrix::<f64>::zeros(n, n),
-                DVector::<f64>::zeros(n),
-                0.0f64,
-                FloorSums::zero(if floor { n } else { 0 }),
-            )
-        };
+        let count = groups.map_or(1, |g| g.1);
         // Per channel, the free parameters its residual can depend on (a channel's gradient row
         // is zero at the other channels' σ0 and albedo): their positions in `free`, ascending.
         let layout: [Vec<(usize, usize)>; 3] = std::array::from_fn(|c| {
@@ -459,13 +516,15 @@ impl Problem<'_> {
         let cols: [[usize; MAX_ROW]; 3] = std::array::from_fn(|c| {
             std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
         });
-        let (mut jtj, mut jtr, mut rtr, sums) = self
+        let mut sums = self
             .obs
-            .par_chunks(2048)
-            .map(|chunk| {
-                let mut acc = ChunkSums::new();
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(ci, chunk)| {
+                let mut acc: Vec<ChunkSums> = (0..count).map(|_| ChunkSums::new()).collect();
                 let mut g = [0.0; MAX_ROW];
-                for o in chunk {
+                for (i, o) in chunk.iter().enumerate() {
+                    let a = &mut acc[groups.map_or(0, |g| g.0[ci * CHUNK + i])];
                     let (l, grad) =
                         self.model
                             .radiance_with_gradient_in(&params, &frame, &o.geometry);
@@ -479,24 +538,45 @@ impl Problem<'_> {
                         for i in 0..m {
                             g[i] = w * grad[ch][cols[ch][i]] * scale[ch][i];
                         }
-                        acc.add(ch, &g[..m], r, w, floor);
+                        a.add(ch, &g[..m], r, w, floor);
                     }
                 }
-                acc.scatter(&layout, n, floor)
+                acc.iter()
+                    .map(|a| a.scatter(&layout, n, floor))
+                    .collect::<Vec<_>>()
             })
             .collect::<Vec<_>>()
             .into_iter()
-            // Summed in chunk order: the same result on every run.
-            .fold(zero(), |(a1, b1, c1, f1), (a2, b2, c2, f2)| {
-                (a1 + a2, b1 + b2, c1 + c2, f1.add(&f2))
-            });
-        for i in 0..n {
-            for j in 0..i {
-                jtj[(j, i)] = jtj[(i, j)];
+            .fold(
+                (0..count)
+                    .map(|_| RawNormal::zero(n, floor))
+                    .collect::<Vec<_>>(),
+                |total, chunk| {
+                    total
+                        .into_iter()
+                        .zip(&chunk)
+                        .map(|(t, c)| t.plus(c))
+                        .collect()
+                },
+            );
+        for s in &mut sums {
+            for i in 0..n {
+                for j in 0..i {
+                    s.jtj[(j, i)] = s.jtj[(i, j)];
+                }
             }
         }
-        // The floor profiled out (module doc): the projections on each channel's weights removed.
-        if floor {
+        sums
+    }
+
+    /// The normal equations of the problem from raw sums of its observation rows: the dark floor
+    /// profiled out (module doc) and the priors' rows added, at the current parameters.
+    pub fn profiled(&self, raw: &RawNormal) -> Normal {
+        let (p, dpdu) = from_unbounded(&self.u);
+        let free = self.free_idx();
+        let (mut jtj, mut jtr, mut rtr) = (raw.jtj.clone(), raw.jtr.clone(), raw.rtr);
+        let sums = &raw.floor;
+        if self.floor {
             for c in 0..3 {
                 if sums.ww[c] > 0.0 {
                     let inv = 1.0 / sums.ww[c];
@@ -523,10 +603,44 @@ impl Problem<'_> {
             rtr_obs: rtr,
             rtr_prior,
             finite,
-            floor: floor.then_some(sums),
+            floor: self.floor.then(|| sums.clone()),
         }
     }
 }
+
+impl Problem<'_> {
+    /// The Gauss–Newton step from the current parameters on the observation rows of `raw` (with
+    /// the priors; the floor profiled out): the unbounded parameters after it, and the dark floor
+    /// it implies (the floor's own step, f = −(wᵀr + wᵀJ·δ)/(wᵀw); 0 when the floor is known).
+    /// `None` where the normal equations are singular or not finite.
+    pub fn newton_step(&self, raw: &RawNormal) -> Option<([f64; N_PARAMS], [f64; 3])> {
+        let ne = self.profiled(raw);
+        if !ne.finite {
+            return None;
+        }
+        let delta = ne.jtj.clone().cholesky()?.solve(&(-&ne.jtr));
+        let mut u = self.u;
+        for (i, k) in self.free_idx().into_iter().enumerate() {
+            u[k] += delta[i];
+        }
+        let floor = if self.floor {
+            let f = &raw.floor;
+            [0, 1, 2].map(|c| {
+                if f.ww[c] > 0.0 {
+                    -(f.wr[c] + f.wg[c].dot(&delta)) / f.ww[c]
+                } else {
+                    0.0
+                }
+            })
+        } else {
+            [0.0; 3]
+        };
+        u.iter().all(|v| v.is_finite()).then_some((u, floor))
+    }
+}
+
+/// Observations per parallel chunk of the normal equations.
+const CHUNK: usize = 2048;
 
 /// The same least-squares problem, reduced to n + 1 residuals: with JᵀJ = RᵀR (Cholesky), the
 /// residuals r̃ = (R⁻ᵀJᵀr, √(rᵀr − ‖R⁻ᵀJᵀr‖²)) and the Jacobian (R; 0) have the same norm, the

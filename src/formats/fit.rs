@@ -123,16 +123,24 @@ pub struct HoldoutJson {
     pub unlit_rel_rmse: f64,
 }
 
-/// The leave-one-radius-out refits of a joint fit.
+/// The leave-one-radius-out estimates of a joint fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JackknifeJson {
+    /// How each estimate was taken: "linear" (Newton steps from the full fit's normal equations,
+    /// the default) or "refit" (the fit repeated).
+    #[serde(default)]
+    pub method: String,
+    /// With "linear": the Newton steps each estimate took (a second where the first was large).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub newton_steps: Vec<u32>,
     /// The radii left out in turn (mm).
     pub radii: Vec<f64>,
     /// Each left-out radius predicted by the fit to the others.
     pub heldout: Vec<HoldoutJson>,
     /// Pixel-weighted mean of the held-out relative RMSE.
     pub heldout_rel_rmse: f64,
-    /// Every refit converged.
+    /// Every refit converged (with "linear": every step was a descent of its subset's normal
+    /// equations).
     pub converged: bool,
     pub seconds: f64,
 }

@@ -174,7 +174,7 @@ pub fn fingerprint(opts: &Options) -> String {
         f.start_sigma0,
         f.start_light.map(|l| (l.azimuth, l.elevation)),
         f.light_fit.name(),
-        f.jackknife,
+        f.jackknife.name(),
         f.entry_transmission,
         if f.tabulated { "table" } else { "closed form" },
         opts.fit_settings().baseline

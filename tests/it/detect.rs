@@ -422,7 +422,7 @@ fn clipped_highlights_are_fitted_and_refined() {
         assert!(dl < 3.0 * std, "{dl}° ± {std}°");
         // The solve: the light within 0.1° of the truth (the goal).
         let mut o = workbench::solve::Options::new(dir.path());
-        o.fit.jackknife = false;
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off;
         o.quiet = true;
         let f = workbench::solve::run(&o).unwrap();
         let dl = Vector3::from(f.light_direction)
@@ -455,7 +455,7 @@ fn grey_backdrop_and_table() {
     };
     let solve = |dir: &Path| {
         let mut o = workbench::solve::Options::new(dir);
-        o.fit.jackknife = false;
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off;
         o.quiet = true;
         workbench::solve::run(&o).unwrap()
     };

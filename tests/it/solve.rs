@@ -608,7 +608,9 @@ fn one_light_per_photo() {
         ..SessionConfig::default()
     };
     let shared = make(base.clone());
-    let f_shared = solve_with(shared.path(), "fit.json", |o| o.fit.jackknife = false);
+    let f_shared = solve_with(shared.path(), "fit.json", |o| {
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off
+    });
     let t = truth(shared.path());
     // The per-image session: each radius rendered alone under its light, then put together.
     let per = tempfile::tempdir().unwrap();
@@ -644,7 +646,9 @@ fn one_light_per_photo() {
         serde_json::to_string_pretty(&sess).unwrap(),
     )
     .unwrap();
-    let f_per = solve_with(per.path(), "fit.json", |o| o.fit.jackknife = false);
+    let f_per = solve_with(per.path(), "fit.json", |o| {
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off
+    });
     let e_shared = worst(&f_shared.sigma0_mm, &t.sigma0_mm);
     let e_per = worst(&f_per.sigma0_mm, &t.sigma0_mm);
     println!(
@@ -669,9 +673,11 @@ fn one_light_per_photo() {
 fn tabulated_cdrf_fits_as_the_closed_form() {
     let guard = default_session();
     let dir = guard.path();
-    let a = solve_with(dir, "fit-table.json", |o| o.fit.jackknife = false);
+    let a = solve_with(dir, "fit-table.json", |o| {
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off
+    });
     let b = solve_with(dir, "fit-closed.json", |o| {
-        o.fit.jackknife = false;
+        o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off;
         o.fit.tabulated = false;
     });
     assert!(a.options.contains("cdrf table") && b.options.contains("cdrf closed form"));

@@ -1,16 +1,24 @@
-//! The leave-one-radius-out jackknife of a joint fit: the spread of the refits joins each
-//! parameter's standard error (docs/uncertainty.md), and each left-out radius is predicted.
+//! The leave-one-radius-out jackknife of a joint fit: the spread of the estimates without each
+//! radius joins each parameter's standard error (docs/uncertainty.md), and each left-out radius is
+//! predicted. By default each estimate is a Newton step from the full fit on its normal equations
+//! less the left-out radius's ([`jackknife_linear`]), one pass over the observations; the refits
+//! ([`jackknife_refit`]) are the option that checks it.
 
 use super::settings::{Extensions, Measured, Reduction, Settings, Setup};
-use super::stages::{fit_joint, JointFit};
+use super::stages::{fit_joint, JointFit, HUBER_K};
 use crate::fit::observe::{self, SphereData};
 use crate::fit::predict::{combine_predictions, predict, Prediction, PREDICT_PIXELS};
+use crate::fit::solver::{self, from_unbounded, to_unbounded, Obs, Problem, RawNormal};
 use crate::formats::fit::{HoldoutJson, JackknifeJson};
 use crate::model::{Params, N_PARAMS};
 use std::time::Instant;
 
-/// The jackknife's refits pool pixels in cells of this many × 0.25° at least.
-pub(crate) const JACKKNIFE_CELLS: u32 = 8;
+/// A linear estimate takes a further Newton step while its last moved a parameter by more than
+/// this fraction of the larger of its formal standard error and the first steps' spread.
+pub(crate) const STEP_TOL: f64 = 0.05;
+
+/// The most Newton steps of one linear estimate.
+pub(crate) const MAX_STEPS: u32 = 4;
 
 /// The jackknife spread of each parameter (0 where not free in the full fit) and its record.
 pub struct Jackknife {
@@ -19,12 +27,11 @@ pub struct Jackknife {
 }
 
 /// Leave-one-radius-out refits of a joint fit: the fit is repeated with every radius left out in
-/// turn (warm-started from the full fit, on 2° cells or its own coarser level), and the spread of
-/// the n refits gives each parameter's jackknife standard error √((n−1)/n · Σ(θᵢ − θ̄)²),
-/// widened by t_{n−1}/2 (its ±2 covers 95.4% with n − 1 degrees of freedom). It sees what the
-/// noise alone does not: a model that fits each radius a little differently. Each left-out
+/// turn (warm-started from the full fit, on its cells), and the spread
+/// of the n refits gives each parameter's jackknife standard error ([`spread`]). It sees what
+/// the noise alone does not: a model that fits each radius a little differently. Each left-out
 /// radius is predicted by the fit to the others. `None` with fewer than 3 radii.
-pub fn jackknife(
+pub fn jackknife_refit(
     settings: &Settings,
     measured: &Measured,
     fitted: &[&SphereData],
@@ -38,10 +45,12 @@ pub fn jackknife(
     if radii.len() < 3 {
         return None;
     }
-    // The refits compare errors of percents between subsets, not of standard errors: 2° cells
-    // (or the full fit's level when coarser).
-    let reduction =
-        Reduction::Factor(((jf.chosen.width_deg / 0.25).round() as u32).max(JACKKNIFE_CELLS));
+    // The full fit's cells (its highlight pixel by pixel), so that the refits estimate what the
+    // linear estimates do.
+    let reduction = match (jf.chosen.width_deg / 0.25).round() as u32 {
+        0 => Reduction::None,
+        f => Reduction::Factor(f),
+    };
     let runs: Vec<(Params, bool, HoldoutJson)> = radii
         .par_iter()
         .map(|&r| {
@@ -69,28 +78,183 @@ pub fn jackknife(
             )
         })
         .collect();
-    let n = runs.len() as f64;
-    let values: Vec<[f64; N_PARAMS]> = runs.iter().map(|r| r.0.to_vec()).collect();
-    // An estimate from n − 1 degrees of freedom: widened so that ±2 of it covers as ±2σ of a
-    // Gaussian does (95.4%), by t_{n−1} / 2 (1.42 for five radii).
+    Some(summarise(radii, runs, jf, "refit", vec![], t))
+}
+
+/// Leave-one-radius-out estimates from the full fit's linearisation: the final stage's normal
+/// equations are accumulated per radius in one pass, and each estimate without a radius starts
+/// as the Gauss–Newton step from the full fit on the totals less that radius's part, with the
+/// full fit's priors, holds, robust weights and dark floor treatment (θ₋g = θ̂ − (H − H_g)⁻¹(g −
+/// g_g), g ≈ 0 at the full fit). Further steps on the other radii's observations ([`iterate`])
+/// take the Huber weights again, as the refit does, until the steps are small against the
+/// spread. The spread is then taken as the refits' ([`spread`]); each left-out radius is
+/// predicted by its estimate. `None` with fewer than 3 radii.
+pub fn jackknife_linear(fitted: &[&SphereData], jf: &JointFit) -> Option<Jackknife> {
+    let t = Instant::now();
+    let mut radii = observe::distinct_radii(fitted);
+    radii.reverse();
+    if radii.len() < 3 {
+        return None;
+    }
+    let same = |s: &SphereData, r: f64| (s.radius_mm - r).abs() < 1e-9;
+    let group_of: Vec<usize> = fitted
+        .iter()
+        .map(|s| {
+            radii
+                .iter()
+                .position(|&r| same(s, r))
+                .expect("a fitted radius")
+        })
+        .collect();
+    let groups: Vec<usize> = jf.problem.sphere.iter().map(|&s| group_of[s]).collect();
+    let u_full = to_unbounded(&jf.fit.params.to_vec());
+    let full = final_problem(jf, &jf.problem.weighted, u_full);
+    let parts = full.grouped_sums(Some((&groups, radii.len())));
+    let total = RawNormal::sum(&parts)?;
+    let first: Vec<Option<Estimate>> = parts
+        .iter()
+        .map(|part| full.newton_step(&total.less(part)))
+        .collect();
+    let tol = step_tolerance(&first, jf);
+    let mut steps = vec![];
+    let runs: Vec<(Params, bool, HoldoutJson)> = (0..radii.len())
+        .map(|g| {
+            let (estimate, n) = match first[g] {
+                Some(x) => iterate(jf, &groups, g, x, &tol),
+                None => (None, 1),
+            };
+            steps.push(n);
+            let ok = estimate.is_some();
+            let (u, floor) = estimate.unwrap_or((u_full, jf.fit.floor_value()));
+            let p = Params::from_vec(&from_unbounded(&u).0);
+            let preds: Vec<Prediction> = fitted
+                .iter()
+                .filter(|s| same(s, radii[g]))
+                .map(|s| predict(&jf.model, &p, s, floor, PREDICT_PIXELS))
+                .collect();
+            (p, ok, combine_predictions(radii[g], &preds))
+        })
+        .collect();
+    Some(summarise(radii, runs, jf, "linear", steps, t))
+}
+
+/// An estimate: the unbounded parameters and the dark floor.
+type Estimate = ([f64; N_PARAMS], [f64; 3]);
+
+/// Per parameter, the largest step (unbounded coordinates) that ends a linear estimate:
+/// [`STEP_TOL`] of the larger of its formal standard error and the spread of the first steps.
+fn step_tolerance(first: &[Option<Estimate>], jf: &JointFit) -> [f64; N_PARAMS] {
+    let dpdu = from_unbounded(&to_unbounded(&jf.fit.params.to_vec())).1;
+    let values: Vec<[f64; N_PARAMS]> = first.iter().flatten().map(|e| e.0).collect();
+    let s = if values.len() >= 2 {
+        spread(&values, &jf.fit.free)
+    } else {
+        [0.0; N_PARAMS]
+    };
+    std::array::from_fn(|k| {
+        let formal = jf.fit.std[k] / dpdu[k].abs();
+        STEP_TOL
+            * if formal.is_finite() {
+                formal.max(s[k])
+            } else {
+                s[k]
+            }
+    })
+}
+
+/// The estimate without group `g` from its first Newton step `first`: further steps on the
+/// other groups' observations, with the Huber weights taken again at each (the refit's
+/// iteratively reweighted fit, from close by), while a step moves a parameter by more than its
+/// `tol` (and at least once with the Huber loss, whose weights the first step kept), at most
+/// [`MAX_STEPS`] in all. Returns the estimate (`None` where a step failed) and the steps taken.
+fn iterate(
+    jf: &JointFit,
+    groups: &[usize],
+    g: usize,
+    first: Estimate,
+    tol: &[f64; N_PARAMS],
+) -> (Option<Estimate>, u32) {
+    let u_full = to_unbounded(&jf.fit.params.to_vec());
+    let robust = jf.problem.robust;
+    let large = |a: &[f64; N_PARAMS], b: &[f64; N_PARAMS]| {
+        (0..N_PARAMS).any(|k| jf.fit.free[k] && (a[k] - b[k]).abs() > tol[k])
+    };
+    if !robust && !large(&u_full, &first.0) {
+        return (Some(first), 1);
+    }
+    let keep: Vec<usize> = (0..groups.len()).filter(|&i| groups[i] != g).collect();
+    let obs: Vec<Obs> = keep.iter().map(|&i| jf.problem.obs[i]).collect();
+    let mut weighted: Vec<Obs> = keep.iter().map(|&i| jf.problem.weighted[i]).collect();
+    let mut cur = first;
+    for n in 1..MAX_STEPS {
+        if robust {
+            let p = Params::from_vec(&from_unbounded(&cur.0).0);
+            weighted = solver::huber_weights(&jf.model, &obs, &weighted, &p, cur.1, HUBER_K).0;
+        }
+        let problem = final_problem(jf, &weighted, cur.0);
+        let Some(next) = problem.newton_step(&problem.grouped_sums(None)[0]) else {
+            return (None, n);
+        };
+        let done = !large(&cur.0, &next.0);
+        cur = next;
+        if done {
+            return (Some(cur), n + 1);
+        }
+    }
+    (Some(cur), MAX_STEPS)
+}
+
+/// The final stage's problem of `jf` on `obs` (all or some of its observations) at `u`.
+fn final_problem<'a>(jf: &JointFit, obs: &'a [Obs], u: [f64; N_PARAMS]) -> Problem<'a> {
+    Problem {
+        model: jf.model,
+        obs,
+        free: jf.fit.free,
+        u,
+        priors: jf.problem.priors.clone(),
+        history: None,
+        floor: jf.fit.floor.is_some(),
+    }
+}
+
+/// Each parameter's jackknife standard error from the n leave-one-out estimates θᵢ,
+/// √((n−1)/n · Σ(θᵢ − θ̄)²), widened by t_{n−1}/2 (its ±2 then covers 95.4% with n − 1 degrees
+/// of freedom, as ±2σ of a Gaussian does: 1.42 for five radii); 0 where not free.
+fn spread(values: &[[f64; N_PARAMS]], free: &[bool; N_PARAMS]) -> [f64; N_PARAMS] {
+    let n = values.len() as f64;
     let widen =
-        crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, runs.len() as u32 - 1) / 2.0;
-    let std = std::array::from_fn(|k| {
-        if !jf.fit.free[k] {
+        crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, values.len() as u32 - 1) / 2.0;
+    std::array::from_fn(|k| {
+        if !free[k] {
             return 0.0;
         }
         let mean = values.iter().map(|v| v[k]).sum::<f64>() / n;
         widen * ((n - 1.0) / n * values.iter().map(|v| (v[k] - mean).powi(2)).sum::<f64>()).sqrt()
-    });
+    })
+}
+
+/// The jackknife of the estimates (parameters, converged, the left-out radius predicted).
+fn summarise(
+    radii: Vec<f64>,
+    runs: Vec<(Params, bool, HoldoutJson)>,
+    jf: &JointFit,
+    method: &str,
+    newton_steps: Vec<u32>,
+    t: Instant,
+) -> Jackknife {
+    let values: Vec<[f64; N_PARAMS]> = runs.iter().map(|r| r.0.to_vec()).collect();
+    let std = spread(&values, &jf.fit.free);
     let heldout: Vec<HoldoutJson> = runs.iter().map(|r| r.2.clone()).collect();
     let w: f64 = heldout
         .iter()
         .map(|h| h.pixels as f64)
         .sum::<f64>()
         .max(1.0);
-    Some(Jackknife {
+    Jackknife {
         std,
         json: JackknifeJson {
+            method: method.into(),
+            newton_steps,
             heldout_rel_rmse: heldout
                 .iter()
                 .map(|h| h.rel_rmse * h.pixels as f64)
@@ -101,5 +265,5 @@ pub fn jackknife(
             converged: runs.iter().all(|r| r.1),
             seconds: t.elapsed().as_secs_f64(),
         },
-    })
+    }
 }

@@ -35,10 +35,12 @@ pub mod settings;
 pub mod stages;
 pub mod start;
 
-pub use jackknife::{jackknife, Jackknife};
+pub use jackknife::{jackknife_linear, jackknife_refit, Jackknife};
 pub use light::PULL_WARN;
 pub(crate) use reduction::SHIFT_LIMIT;
 pub use session::{fit_session, Session};
-pub use settings::{ExtensionChoice, Extensions, LightFit, Measured, Reduction, Settings, Setup};
+pub use settings::{
+    ExtensionChoice, Extensions, JackknifeMethod, LightFit, Measured, Reduction, Settings, Setup,
+};
 pub(crate) use stages::HUBER_K;
 pub use stages::{fit_joint, JointFit};

@@ -23,8 +23,9 @@ pub(crate) const HIGHLIGHT_BLOCKS: [u32; 4] = [2, 4, 8, 16];
 
 /// The reduction level (docs/pipeline.md, step 4): angular cells first (the highlight pixel by
 /// pixel), then the highlight's pixel blocks, each the coarsest whose predicted shift is within
-/// tolerance under `Reduction::Auto`. Returns the observations the joint stage fits, the level
-/// chosen (width 0: every pixel) and the levels tried.
+/// tolerance under `Reduction::Auto`. Returns the observations the joint stage fits with the
+/// sphere each comes from (its index in `spheres`), the level chosen (width 0: every pixel) and
+/// the levels tried.
 pub(crate) fn choose_reduction(
     reduction: Reduction,
     pooled: &Pooled,
@@ -32,7 +33,7 @@ pub(crate) fn choose_reduction(
     model: &Model,
     p: &Params,
     free: [bool; N_PARAMS],
-) -> (Vec<Obs>, Level, Vec<Level>) {
+) -> (Vec<Obs>, Vec<usize>, Level, Vec<Level>) {
     let mut levels = vec![];
     let level = |f: u32, b: u32, n: usize, shift: &crate::fit::reduce::Shift| Level {
         width_deg: f as f64 * 0.25,
@@ -86,10 +87,20 @@ pub(crate) fn choose_reduction(
             }
         }
     };
-    let final_obs = match &chosen_cells {
-        Some(cells) => pooled.observations(cells),
+    let (final_obs, sphere) = match &chosen_cells {
+        Some(cells) => (
+            pooled.observations(cells),
+            cells.iter().map(|c| c.sphere).collect(),
+        ),
         // Every pixel.
-        None => spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect(),
+        None => (
+            spheres.iter().flat_map(|s| s.obs.iter().cloned()).collect(),
+            spheres
+                .iter()
+                .enumerate()
+                .flat_map(|(i, s)| std::iter::repeat_n(i, s.obs.len()))
+                .collect(),
+        ),
     };
     let tried = levels.iter().find(|l| {
         Some(l.width_deg) == chosen_factor.map(|f| f as f64 * 0.25) && l.highlight_block_px == block
@@ -102,5 +113,5 @@ pub(crate) fn choose_reduction(
         within_tolerance: tried.is_none_or(|l| l.within_tolerance),
         limiting: tried.and_then(|l| l.limiting.clone()),
     };
-    (final_obs, chosen, levels)
+    (final_obs, sphere, chosen, levels)
 }

@@ -5,10 +5,11 @@
 
 use super::baseline::baseline;
 use super::choice::choose_extensions;
-use super::jackknife::{jackknife, Jackknife};
+use super::jackknife::{jackknife_linear, jackknife_refit, Jackknife};
 use super::light::PULL_WARN;
 use super::settings::{
-    ExtensionChoice, Extensions, LightFit, Measured, Settings, Setup, DEFAULT_EXTENSION_RADII,
+    ExtensionChoice, Extensions, JackknifeMethod, LightFit, Measured, Settings, Setup,
+    DEFAULT_EXTENSION_RADII,
 };
 use super::stages::{fit_joint, JointFit};
 use crate::fit::observe::{self, SphereData};
@@ -50,14 +51,17 @@ pub fn fit_session(
     );
     let held = hold_pulled_light(settings, measured, fitted, ext, first, notes);
     let (jf, settings) = (held.fit, held.settings);
-    let jack = if settings.jackknife {
-        let j = jackknife(
-            &settings,
-            measured,
-            fitted,
-            &jf,
-            Extensions::of_fit(&jf.fit.free),
-        );
+    let jack = if settings.jackknife != JackknifeMethod::Off {
+        let j = match settings.jackknife {
+            JackknifeMethod::Refit => jackknife_refit(
+                &settings,
+                measured,
+                fitted,
+                &jf,
+                Extensions::of_fit(&jf.fit.free),
+            ),
+            _ => jackknife_linear(fitted, &jf),
+        };
         if j.is_none() {
             skipped.push(
                 "jackknife: fewer than 3 radii, the standard errors are the formal ones".into(),
@@ -66,7 +70,7 @@ pub fn fit_session(
         j
     } else {
         skipped.push(
-            "jackknife: off (--no-jackknife), the standard errors are the formal ones".into(),
+            "jackknife: off (--jackknife off), the standard errors are the formal ones".into(),
         );
         None
     };

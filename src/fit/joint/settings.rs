@@ -109,6 +109,30 @@ pub enum ExtensionChoice {
 /// albedo and b, a third is what tests them).
 pub(crate) const DEFAULT_EXTENSION_RADII: usize = 3;
 
+/// How the jackknife's leave-one-radius-out estimates are taken.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum JackknifeMethod {
+    /// Newton steps from the full fit's normal equations, one pass over the observations
+    /// ([`super::jackknife::jackknife_linear`]).
+    #[default]
+    Linear,
+    /// The fit repeated without each radius ([`super::jackknife::jackknife_refit`]): the check
+    /// of the linear estimates, several times the cost.
+    Refit,
+    /// None: the standard errors are the formal ones.
+    Off,
+}
+
+impl JackknifeMethod {
+    pub fn name(&self) -> &'static str {
+        match self {
+            JackknifeMethod::Linear => "linear",
+            JackknifeMethod::Refit => "refit",
+            JackknifeMethod::Off => "off",
+        }
+    }
+}
+
 /// The fit's settings, as the user chose them (the defaults: [`Settings::default`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settings {
@@ -126,9 +150,10 @@ pub struct Settings {
     pub start_light: Option<LightAngles>,
     /// How the fit treats the detector's light (prior, free, held).
     pub light_fit: LightFit,
-    /// Refit with each radius left out in turn: the jackknife spread of every parameter joins its
-    /// standard error, and each left-out radius is predicted (needs 3 or more radii).
-    pub jackknife: bool,
+    /// The leave-one-radius-out jackknife: the spread of the estimates without each radius joins
+    /// every parameter's standard error, and each left-out radius is predicted (needs 3 or more
+    /// radii).
+    pub jackknife: JackknifeMethod,
     /// Blur the irradiance transmitted into the medium (entry-side Fresnel) rather than the bare
     /// clamped cosine (docs/model.md; off by default, docs/uncertainty.md says why).
     pub entry_transmission: bool,
@@ -150,7 +175,7 @@ impl Default for Settings {
             start_sigma0: None,
             start_light: None,
             light_fit: LightFit::Prior,
-            jackknife: true,
+            jackknife: JackknifeMethod::Linear,
             entry_transmission: false,
             tabulated: true,
             baseline: false,

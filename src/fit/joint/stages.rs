@@ -74,6 +74,22 @@ pub struct JointFit {
     pub eta_systematic: f64,
     /// χ²/dof against the measured noise: (residual / noise)² per observation row.
     pub chi2_dof: f64,
+    /// The final stage's least-squares problem, for what is computed from its linearisation.
+    pub problem: FinalProblem,
+}
+
+/// The observations the final stage fitted, with its robust weights (`weighted`) and without
+/// (`obs`), the sphere each comes from (its index in the fitted spheres) and the priors it fitted
+/// with: the leave-one-group-out estimates are Newton steps from the fit on these
+/// ([`super::jackknife`]).
+#[derive(Clone, Debug, Default)]
+pub struct FinalProblem {
+    pub obs: Vec<Obs>,
+    pub weighted: Vec<Obs>,
+    /// The weights are the Huber loss's, [`HUBER_K`] (else `weighted` is `obs`).
+    pub robust: bool,
+    pub sphere: Vec<usize>,
+    pub priors: Vec<Prior>,
 }
 
 /// Seconds per phase, each from the end of the one before.
@@ -141,7 +157,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     );
     laps.lap("specular start");
     let model = setup.model();
-    let (final_obs, chosen, levels) =
+    let (final_obs, final_sphere, chosen, levels) =
         choose_reduction(setup.reduction, &pooled, spheres, &model, &p, free);
     if chosen.width_deg == 0.0 && setup.reduction == Reduction::Auto {
         notes.push(format!(
@@ -149,7 +165,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         ));
     }
     laps.lap("reduction choice");
-    let (fit, downweighted) = fit_identified(
+    let (fit, downweighted, weighted, fit_priors) = fit_identified(
         setup,
         &final_obs,
         (&mut p, &mut free),
@@ -205,6 +221,13 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         prior_tension: tension,
         eta_systematic,
         chi2_dof: chi2,
+        problem: FinalProblem {
+            obs: final_obs,
+            weighted,
+            robust: setup.settings.robust,
+            sphere: final_sphere,
+            priors: fit_priors,
+        },
     }
 }
 
@@ -288,8 +311,9 @@ pub(crate) fn diffuse_stage(
 }
 
 /// The full fit, repeated (at most twice more) with what the data do not determine held: η at
-/// its prior, α held, the lobe or an extension off. Returns the fit and the residuals the Huber
-/// loss down-weighted.
+/// its prior, α held, the lobe or an extension off. Returns the fit, the residuals the Huber
+/// loss down-weighted, the observations with the final robust weights and the priors of the
+/// final fit.
 #[allow(clippy::too_many_arguments)]
 fn fit_identified(
     setup: &Setup,
@@ -300,13 +324,13 @@ fn fit_identified(
     status: &mut [String; N_PARAMS],
     stages: &mut Vec<Stage>,
     notes: &mut Vec<String>,
-) -> (Fit, usize) {
+) -> (Fit, usize, Vec<Obs>, Vec<Prior>) {
     let model = setup.model();
-    let mut downweighted = 0;
     let mut fit = None;
     for attempt in 0..3 {
         let t = std::time::Instant::now();
-        let (f, _, down) = if setup.settings.robust {
+        let fit_priors = priors.clone();
+        let (f, weighted, down) = if setup.settings.robust {
             solver::fit_robust(
                 model,
                 final_obs,
@@ -326,9 +350,8 @@ fn fit_identified(
                 priors,
                 setup.measured.fit_floor,
             );
-            (f, vec![], 0)
+            (f, final_obs.to_vec(), 0)
         };
-        downweighted = down;
         stages.push(Stage::of(
             if attempt == 0 {
                 "joint"
@@ -352,7 +375,7 @@ fn fit_identified(
             changed |= hold(k, &f, setup, &mut round);
         }
         if !changed || attempt == 2 {
-            fit = Some(f);
+            fit = Some((f, down, weighted, fit_priors));
             break;
         }
         // Keep what was fitted for the rest as the next start.
@@ -366,5 +389,5 @@ fn fit_identified(
             }
         }
     }
-    (fit.expect("the loop ends with a fit"), downweighted)
+    fit.expect("the loop ends with a fit")
 }
