@@ -578,7 +578,7 @@ fn grouped_normal_equations_are_those_of_each_subset() {
         &all.normal_equations(),
         "the parts' sum",
     );
-    for g in 0..3 {
+    for (g, part) in parts.iter().enumerate() {
         // The group's own part, and the totals less it, against the problem of just those rows.
         let own: Vec<Obs> = (0..obs.len())
             .filter(|&i| groups[i] == g)
@@ -589,12 +589,12 @@ fn grouped_normal_equations_are_those_of_each_subset() {
             .map(|i| obs[i])
             .collect();
         close(
-            &all.profiled(&parts[g]),
+            &all.profiled(part),
             &problem(&own, &start, &priors).normal_equations(),
             "a part",
         );
         close(
-            &all.profiled(&total.less(&parts[g])),
+            &all.profiled(&total.less(part)),
             &problem(&rest, &start, &priors).normal_equations(),
             "the rest",
         );
@@ -632,13 +632,13 @@ fn newton_steps_from_the_full_fit_reach_the_fit_without_a_group() {
     let parts = whole.grouped_sums(Some((&groups, 3)));
     let total = solver::RawNormal::sum(&parts).unwrap();
     let mut worst = [0.0f64; 3];
-    for g in 0..3 {
+    for (g, part) in parts.iter().enumerate() {
         let rest: Vec<Obs> = (0..obs.len())
             .filter(|&i| groups[i] != g)
             .map(|i| obs[i])
             .collect();
         let refit = fit(&rest, &full.params);
-        let mut est = whole.newton_step(&total.less(&parts[g])).unwrap();
+        let mut est = whole.newton_step(&total.less(part)).unwrap();
         let mut per_step = vec![];
         for _ in 0..3 {
             let p = from_unbounded(&est.0).0;

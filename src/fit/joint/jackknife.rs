@@ -4,18 +4,15 @@
 //! less the left-out radius's ([`jackknife_linear`]), one pass over the observations; the refits
 //! ([`jackknife_refit`]) are the option that checks it.
 
+use super::newton::{self, Estimate};
 use super::settings::{Extensions, Measured, Reduction, Settings, Setup};
-use super::stages::{fit_joint, JointFit, HUBER_K};
+use super::stages::{fit_joint, JointFit};
 use crate::fit::observe::{self, SphereData};
 use crate::fit::predict::{combine_predictions, predict, Prediction, PREDICT_PIXELS};
-use crate::fit::solver::{self, from_unbounded, to_unbounded, Obs, Problem, RawNormal};
+use crate::fit::solver::{from_unbounded, to_unbounded, Obs, RawNormal};
 use crate::formats::fit::{HoldoutJson, JackknifeJson};
 use crate::model::{Params, N_PARAMS};
 use std::time::Instant;
-
-/// A linear estimate takes a further Newton step while its last moved a parameter by more than
-/// this fraction of the larger of its formal standard error and the first steps' spread.
-pub(crate) const STEP_TOL: f64 = 0.05;
 
 /// The most Newton steps of one linear estimate.
 pub(crate) const MAX_STEPS: u32 = 4;
@@ -108,7 +105,7 @@ pub fn jackknife_linear(fitted: &[&SphereData], jf: &JointFit) -> Option<Jackkni
         .collect();
     let groups: Vec<usize> = jf.problem.sphere.iter().map(|&s| group_of[s]).collect();
     let u_full = to_unbounded(&jf.fit.params.to_vec());
-    let full = final_problem(jf, &jf.problem.weighted, u_full);
+    let full = newton::problem(jf, &jf.problem.weighted, jf.fit.free, u_full);
     let parts = full.grouped_sums(Some((&groups, radii.len())));
     let total = RawNormal::sum(&parts)?;
     let first: Vec<Option<Estimate>> = parts
@@ -138,35 +135,22 @@ pub fn jackknife_linear(fitted: &[&SphereData], jf: &JointFit) -> Option<Jackkni
     Some(summarise(radii, runs, jf, "linear", steps, t))
 }
 
-/// An estimate: the unbounded parameters and the dark floor.
-type Estimate = ([f64; N_PARAMS], [f64; 3]);
-
-/// Per parameter, the largest step (unbounded coordinates) that ends a linear estimate:
-/// [`STEP_TOL`] of the larger of its formal standard error and the spread of the first steps.
+/// Per parameter, the largest step (unbounded coordinates) that ends a linear estimate: the
+/// larger of its formal standard error and the spread of the first steps, times
+/// [`newton::STEP_TOL`].
 fn step_tolerance(first: &[Option<Estimate>], jf: &JointFit) -> [f64; N_PARAMS] {
-    let dpdu = from_unbounded(&to_unbounded(&jf.fit.params.to_vec())).1;
     let values: Vec<[f64; N_PARAMS]> = first.iter().flatten().map(|e| e.0).collect();
     let s = if values.len() >= 2 {
         spread(&values, &jf.fit.free)
     } else {
         [0.0; N_PARAMS]
     };
-    std::array::from_fn(|k| {
-        let formal = jf.fit.std[k] / dpdu[k].abs();
-        STEP_TOL
-            * if formal.is_finite() {
-                formal.max(s[k])
-            } else {
-                s[k]
-            }
-    })
+    newton::tolerance(jf, &s)
 }
 
 /// The estimate without group `g` from its first Newton step `first`: further steps on the
-/// other groups' observations, with the Huber weights taken again at each (the refit's
-/// iteratively reweighted fit, from close by), while a step moves a parameter by more than its
-/// `tol` (and at least once with the Huber loss, whose weights the first step kept), at most
-/// [`MAX_STEPS`] in all. Returns the estimate (`None` where a step failed) and the steps taken.
+/// other groups' observations ([`newton::iterate`]), at most [`MAX_STEPS`] in all. Returns the
+/// estimate (`None` where a step failed) and the steps taken.
 fn iterate(
     jf: &JointFit,
     groups: &[usize],
@@ -175,45 +159,19 @@ fn iterate(
     tol: &[f64; N_PARAMS],
 ) -> (Option<Estimate>, u32) {
     let u_full = to_unbounded(&jf.fit.params.to_vec());
-    let robust = jf.problem.robust;
-    let large = |a: &[f64; N_PARAMS], b: &[f64; N_PARAMS]| {
-        (0..N_PARAMS).any(|k| jf.fit.free[k] && (a[k] - b[k]).abs() > tol[k])
-    };
-    if !robust && !large(&u_full, &first.0) {
-        return (Some(first), 1);
-    }
     let keep: Vec<usize> = (0..groups.len()).filter(|&i| groups[i] != g).collect();
     let obs: Vec<Obs> = keep.iter().map(|&i| jf.problem.obs[i]).collect();
-    let mut weighted: Vec<Obs> = keep.iter().map(|&i| jf.problem.weighted[i]).collect();
-    let mut cur = first;
-    for n in 1..MAX_STEPS {
-        if robust {
-            let p = Params::from_vec(&from_unbounded(&cur.0).0);
-            weighted = solver::huber_weights(&jf.model, &obs, &weighted, &p, cur.1, HUBER_K).0;
-        }
-        let problem = final_problem(jf, &weighted, cur.0);
-        let Some(next) = problem.newton_step(&problem.grouped_sums(None)[0]) else {
-            return (None, n);
-        };
-        let done = !large(&cur.0, &next.0);
-        cur = next;
-        if done {
-            return (Some(cur), n + 1);
-        }
-    }
-    (Some(cur), MAX_STEPS)
-}
-
-/// The final stage's problem of `jf` on `obs` (all or some of its observations) at `u`.
-fn final_problem<'a>(jf: &JointFit, obs: &'a [Obs], u: [f64; N_PARAMS]) -> Problem<'a> {
-    Problem {
-        model: jf.model,
-        obs,
-        free: jf.fit.free,
-        u,
-        priors: jf.problem.priors.clone(),
-        history: None,
-        floor: jf.fit.floor.is_some(),
+    let weighted: Vec<Obs> = keep.iter().map(|&i| jf.problem.weighted[i]).collect();
+    match newton::iterate(
+        jf,
+        (&obs, weighted),
+        jf.fit.free,
+        (&u_full, first),
+        tol,
+        MAX_STEPS,
+    ) {
+        Some(it) => (Some(it.estimate), it.steps),
+        None => (None, MAX_STEPS),
     }
 }
 

@@ -21,14 +21,19 @@
 //! - [`checks`]: what the result's residuals and geometry say about it, as notes;
 //! - [`choice`]: the extensions chosen by held-out error; [`jackknife`]: the leave-one-radius-out
 //!   spread; [`baseline`]: the paper's procedure beside the fit;
+//! - [`hold`]: the light held at the detector's where the shading pulls it too far;
+//! - [`newton`]: Newton steps from a fit to the fit of a changed problem (a radius left out, the
+//!   light held), for the jackknife and the light's hold;
 //! - [`session`]: the fit with all of that around it, as `solve` runs it.
 
 pub mod baseline;
 pub mod checks;
 pub mod choice;
+pub mod hold;
 pub mod identify;
 pub mod jackknife;
 pub mod light;
+pub mod newton;
 pub mod reduction;
 pub mod session;
 pub mod settings;

@@ -5,8 +5,8 @@
 
 use super::baseline::baseline;
 use super::choice::choose_extensions;
+use super::hold::hold_pulled_light;
 use super::jackknife::{jackknife_linear, jackknife_refit, Jackknife};
-use super::light::PULL_WARN;
 use super::settings::{
     ExtensionChoice, Extensions, JackknifeMethod, LightFit, Measured, Settings, Setup,
     DEFAULT_EXTENSION_RADII,
@@ -14,7 +14,7 @@ use super::settings::{
 use super::stages::{fit_joint, JointFit};
 use crate::fit::observe::{self, SphereData};
 use crate::formats::fit::{BaselineJson, ModelChoice};
-use crate::model::{idx, LightAngles, N_PARAMS, PARAM_NAMES};
+use crate::model::{idx, N_PARAMS, PARAM_NAMES};
 use std::time::Instant;
 
 /// What [`fit_session`] returns.
@@ -134,76 +134,6 @@ fn extensions(
             notes.push(format!("model: {} ({})", mc.chosen, mc.reason));
             (e, Some(mc), seconds)
         }
-    }
-}
-
-/// The fit after the light's hold, the settings it ran with, and the light's systematic.
-struct Held {
-    fit: JointFit,
-    settings: Settings,
-    /// Per parameter, the light's systematic on it (0 where none).
-    light_shift: [f64; N_PARAMS],
-    /// The shading pulled the light beyond [`PULL_WARN`].
-    pulled: bool,
-}
-
-/// A light pulled beyond [`PULL_WARN`] of the detector's errors is pulled by the model's error,
-/// not supported by the data: it is held at the detector's and the fit repeated. Each parameter's
-/// shift between the two fits is the light's systematic on it and joins its std; a light taken
-/// from the detector keeps the detector's error (docs/uncertainty.md, "When the shading pulls the
-/// light").
-fn hold_pulled_light(
-    settings: &Settings,
-    measured: &Measured,
-    fitted: &[&SphereData],
-    ext: Extensions,
-    first: JointFit,
-    notes: &mut Vec<String>,
-) -> Held {
-    let mut jf = first;
-    let mut fit_settings = *settings;
-    let mut light_shift = [0.0; N_PARAMS];
-    let pulled = jf.light_pull.filter(|p| p.pull > PULL_WARN);
-    if let (LightFit::Prior, Some(pull), Some(_)) = (settings.light_fit, pulled, measured.light) {
-        fit_settings.light_fit = LightFit::Hold;
-        let setup = Setup::new(&fit_settings, measured, ext, settings.reduction);
-        let held = fit_joint(&setup, fitted);
-        let (a, b) = (jf.fit.params.to_vec(), held.fit.params.to_vec());
-        light_shift = std::array::from_fn(|k| {
-            if held.fit.free[k] {
-                (a[k] - b[k]).abs()
-            } else {
-                0.0
-            }
-        });
-        let moved_sigma0: Vec<String> = (0..3)
-            .map(|c| format!("{:.3}", jf.fit.params.material.sigma0_mm[c]))
-            .collect();
-        notes.push(format!(
-            "the light is held at the highlights' estimate: the shading pulled it {:.1} of its errors, further than the data support; with the pulled light σ0 was {} mm, and each parameter's shift between the two fits joins its std",
-            pull.pull,
-            moved_sigma0.join(", ")
-        ));
-        jf = JointFit {
-            light_pull: Some(pull),
-            ..held
-        };
-        let why = format!("held: the detector's (pulled {:.1} std)", pull.pull);
-        jf.status[idx::AZIMUTH] = why.clone();
-        jf.status[idx::ELEVATION] = why;
-    }
-    if fit_settings.light_fit == LightFit::Hold && settings.start_light.is_none() {
-        if let (Some(s), Some(d)) = (measured.light_std, measured.light) {
-            let el = LightAngles::from_direction(&d).elevation;
-            light_shift[idx::AZIMUTH] = s / el.cos().abs().max(1e-3);
-            light_shift[idx::ELEVATION] = s;
-        }
-    }
-    Held {
-        fit: jf,
-        settings: fit_settings,
-        light_shift,
-        pulled: pulled.is_some(),
     }
 }
 

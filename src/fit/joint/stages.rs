@@ -25,7 +25,7 @@ use std::time::Instant;
 pub(crate) const HUBER_K: f64 = 1.345;
 
 impl Stage {
-    fn of(name: &str, obs: usize, f: &Fit, t: std::time::Instant) -> Stage {
+    pub(crate) fn of(name: &str, obs: usize, f: &Fit, t: std::time::Instant) -> Stage {
         Stage {
             name: name.into(),
             observations: obs,
