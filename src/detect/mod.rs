@@ -721,41 +721,46 @@ pub fn run(opts: &Options) -> Result<Detections> {
     // One set: the overlays, then detections.json (what the reuse check trusts) last.
     let overlay_dir = out_dir.join("overlays");
     let set = crate::formats::output::OutputSet::begin(&[&out, &overlay_dir]);
-    let mut images = vec![];
-    for (i, ((img, fs), info)) in per_image.iter().zip(&report.images).enumerate() {
-        let light = lights.for_photo(i);
-        let spheres = fs
-            .iter()
-            .enumerate()
-            .map(|(j, f)| {
-                let outlier = lights.outlier(i, j, fs);
-                let exposure = info.exposure.unwrap_or(1.0);
-                sphere_detection(f, img, exposure, &proj, light.as_ref(), outlier)
+    // Photos in parallel: each one's samples and overlay (a PNG to encode) are its own.
+    let images: Vec<ImageDetection> = per_image
+        .par_iter()
+        .zip(&report.images)
+        .enumerate()
+        .map(|(i, ((img, fs), info))| -> Result<ImageDetection> {
+            let light = lights.for_photo(i);
+            let spheres = fs
+                .iter()
+                .enumerate()
+                .map(|(j, f)| {
+                    let outlier = lights.outlier(i, j, fs);
+                    let exposure = info.exposure.unwrap_or(1.0);
+                    sphere_detection(f, img, exposure, &proj, light.as_ref(), outlier)
+                })
+                .collect();
+            let overlay = if opts.overlays {
+                let stem = Path::new(&info.file)
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| format!("image{i}"));
+                let rel = format!("overlays/{stem}.png");
+                crate::detect::overlay::write(&out_dir.join(&rel), img, &proj, fs, light.as_ref())?;
+                Some(rel)
+            } else {
+                None
+            };
+            Ok(ImageDetection {
+                file: info.file.clone(),
+                width: img.width,
+                height: img.height,
+                exposure: info.exposure,
+                exif_notes: info.exif_notes.clone(),
+                light_direction: lights.image[i].as_ref().map(|c| arr3(&c.light)),
+                light_std_deg: lights.image[i].as_ref().map(|c| c.std().to_degrees()),
+                spheres,
+                overlay,
             })
-            .collect();
-        let overlay = if opts.overlays {
-            let stem = Path::new(&info.file)
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| format!("image{i}"));
-            let rel = format!("overlays/{stem}.png");
-            crate::detect::overlay::write(&out_dir.join(&rel), img, &proj, fs, light.as_ref())?;
-            Some(rel)
-        } else {
-            None
-        };
-        images.push(ImageDetection {
-            file: info.file.clone(),
-            width: img.width,
-            height: img.height,
-            exposure: info.exposure,
-            exif_notes: info.exif_notes.clone(),
-            light_direction: lights.image[i].as_ref().map(|c| arr3(&c.light)),
-            light_std_deg: lights.image[i].as_ref().map(|c| c.std().to_degrees()),
-            spheres,
-            overlay,
-        });
-    }
+        })
+        .collect::<Result<_>>()?;
     let session_light = lights.session;
     let angles = session_light
         .as_ref()

@@ -70,7 +70,7 @@ pub fn fit_session(
         j
     } else {
         skipped.push(
-            "jackknife: off (--jackknife off), the standard errors are the formal ones".into(),
+            "jackknife: off (--jackknife off or --no-jackknife), the standard errors are the formal ones".into(),
         );
         None
     };
