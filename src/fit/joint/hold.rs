@@ -97,7 +97,7 @@ pub(crate) const HOLD_STEPS: u32 = 16;
 /// problem with the light's angles fixed ([`newton::iterate`]: the Huber weights taken again at
 /// each step), until a step moves no parameter by more than [`newton::STEP_TOL`] of its formal
 /// standard error. `None` — the whole fit is repeated — where they do not settle within
-/// [`HOLD_STEPS`] (a light far from the pulled one: Levenberg–Marquardt on the same problem from
+/// [`HOLD_STEPS`], or stop contracting ([`newton::iterate`]) (a light far from the pulled one: Levenberg–Marquardt on the same problem from
 /// the fit was measured to land 2.8 std from the repeated fit on the jade session, whose light
 /// was pulled 3°), or leave a parameter undetermined (the whole fit's identifiability rounds
 /// would hold it).
@@ -127,7 +127,7 @@ fn held_from_the_fit(
                 free,
                 (&u0, step),
                 &tol,
-                HOLD_STEPS,
+                (HOLD_STEPS, true),
             )
         })
         .filter(|it| it.converged);

@@ -168,7 +168,7 @@ fn iterate(
         jf.fit.free,
         (&u_full, first),
         tol,
-        MAX_STEPS,
+        (MAX_STEPS, false),
     ) {
         Some(it) => (Some(it.estimate), it.steps),
         None => (None, MAX_STEPS),
