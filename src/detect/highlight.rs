@@ -271,7 +271,7 @@ impl Fit {
     /// [`Fit::residuals`] and their Jacobian along (the two angles, ln α), exact for the
     /// variable projection (Golub and Pereyra): with G = AᵀA over the rows that entered the
     /// linear solve, ∂c = G⁻¹(∂Aᵀ r − Aᵀ ∂A c) and ∂rᵢ = −(∂aᵢ·c + aᵢ·∂c), zero where a clipped
-    /// pixel's residual is (docs/pipeline.md, "The highlight's lobe").
+    /// pixel's residual is (docs/commands.md, "`detect`: how, per photo", step 4).
     fn residuals_and_jacobian(
         &self,
         pix: &[Px],

@@ -846,24 +846,6 @@ pub fn fit_with_floor(
     priors: &[Prior],
     floor: bool,
 ) -> Fit {
-    fit_to(model, obs, start, (free, priors), floor, LM_TOL)
-}
-
-/// The stopping tolerance of the iteratively reweighted fit's rounds before its last
-/// ([`fit_robust`]): their weights are taken again from where they end, so the digits past this
-/// relative change of the cost buy nothing (the tabulated kernel's kinks make the last ones crawl,
-/// ~8 evaluations a round for 10⁻⁸ of the cost). The last round stops at [`LM_TOL`].
-pub(crate) const LM_TOL_ROUND: f64 = 1e-6;
-
-/// [`fit_with_floor`] stopped at the relative tolerance `tol` (cost reduction and step).
-fn fit_to(
-    model: Model,
-    obs: &[Obs],
-    start: &Params,
-    (free, priors): ([bool; N_PARAMS], &[Prior]),
-    floor: bool,
-    tol: f64,
-) -> Fit {
     let problem = Problem {
         model,
         obs,
@@ -874,8 +856,8 @@ fn fit_to(
         floor,
     };
     let (reduced, report) = LevenbergMarquardt::new()
-        .with_ftol(tol)
-        .with_xtol(tol)
+        .with_ftol(LM_TOL)
+        .with_xtol(LM_TOL)
         .with_patience(200)
         .minimize(Reduced::new(problem));
     let problem = reduced.problem;
@@ -959,10 +941,8 @@ pub(crate) fn huber_weights(
 
 /// A fit with the Huber loss, by iteratively reweighted least squares around [`fit`]
 /// ([`huber_weights`]), repeated from its own result until no weight changes by more than 1%
-/// (at most `rounds` times), each round but the last stopped at [`LM_TOL_ROUND`], the last — on
-/// the weights returned — at [`LM_TOL`]. Returns the final fit, the observations with their
-/// final weights and the number of down-weighted channel residuals. `floor`: as in
-/// [`fit_with_floor`].
+/// (at most `rounds` times). Returns the final fit, the observations with their final weights
+/// and the number of down-weighted channel residuals. `floor`: as in [`fit_with_floor`].
 #[allow(clippy::too_many_arguments)]
 pub fn fit_robust(
     model: Model,
@@ -974,36 +954,24 @@ pub fn fit_robust(
     k: f64,
     rounds: usize,
 ) -> (Fit, Vec<Obs>, usize) {
-    let fit = |o: &[Obs], p: &Params, tol: f64| fit_to(model, o, p, (free, priors), floor, tol);
-    // Each round's fit continues from the one before, its history and evaluations added.
-    let chain = |before: Fit, next: Fit| {
-        let mut history = before.history;
-        history.extend(&next.history);
-        Fit {
-            history,
-            evaluations: before.evaluations + next.evaluations,
-            ..next
-        }
-    };
+    let fit = |o: &[Obs], p: &Params| fit_with_floor(model, o, p, free, priors, floor);
     let mut current: Vec<Obs> = obs.to_vec();
-    let mut f = fit(
-        &current,
-        start,
-        if rounds > 0 { LM_TOL_ROUND } else { LM_TOL },
-    );
+    let mut f = fit(&current, start);
     let mut down = 0;
-    for round in 0..rounds {
+    for _ in 0..rounds {
         let (next, d, changed) =
             huber_weights(&model, obs, &current, &f.params, f.floor_value(), k);
         down = d;
         current = next;
-        let last = !changed || round + 1 == rounds;
-        let tol = if last { LM_TOL } else { LM_TOL_ROUND };
-        let p = f.params;
-        f = chain(f, fit(&current, &p, tol));
-        if last {
+        if !changed {
             break;
         }
+        let mut history = std::mem::take(&mut f.history);
+        let evaluations = f.evaluations;
+        f = fit(&current, &f.params);
+        history.extend(&f.history);
+        f.history = history;
+        f.evaluations += evaluations;
     }
     (f, current, down)
 }
