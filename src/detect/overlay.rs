@@ -4,7 +4,7 @@
 use crate::camera::outline::Projection;
 use crate::detect::found::Found;
 use crate::error::{Error, Result};
-use crate::formats::photo::{srgb_encode, LinearRgb};
+use crate::formats::photo::{srgb_u8, LinearRgb};
 use crate::model::LightAngles;
 use crate::plot::{register_font, BLUE, GREEN, ORANGE, VERMILLION};
 use nalgebra::{Vector2, Vector3};
@@ -55,8 +55,8 @@ fn tone_mapped(img: &LinearRgb, k: u32) -> Vec<u8> {
         .step_by(7)
         .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
         .collect();
-    lum.sort_by(|a, b| a.total_cmp(b));
-    let white = (lum[(lum.len() as f64 * 0.995) as usize].max(1e-6) / 0.9) as f64;
+    let at = (lum.len() as f64 * 0.995) as usize;
+    let white = ((*lum.select_nth_unstable_by(at, |a, b| a.total_cmp(b)).1).max(1e-6) / 0.9) as f64;
     let mut buf = vec![0u8; (w * h * 3) as usize];
     for y in 0..h {
         for x in 0..w {
@@ -68,8 +68,8 @@ fn tone_mapped(img: &LinearRgb, k: u32) -> Vec<u8> {
                         s += img.data[3 * i + c] as f64;
                     }
                 }
-                let v = srgb_encode((s / (k * k) as f64 / white).clamp(0.0, 1.0));
-                buf[((y * w + x) * 3 + c as u32) as usize] = (v * 255.0 + 0.5) as u8;
+                let v = srgb_u8((s / (k * k) as f64 / white).clamp(0.0, 1.0));
+                buf[((y * w + x) * 3 + c as u32) as usize] = v;
             }
         }
     }

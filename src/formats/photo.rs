@@ -20,6 +20,36 @@ pub(crate) fn srgb_encode(x: f64) -> f64 {
     }
 }
 
+/// The 8-bit sRGB code of a linear value, `(srgb_encode(x)·255 + 0.5)` truncated, to the bit,
+/// without a power: the code is the number of the 255 thresholds — the smallest linear values
+/// reaching each code, found once by bisection over the values' bit patterns (ordered like the
+/// values for x ≥ 0) — at or below x. Equal because the encoding never decreases.
+pub(crate) fn srgb_u8(x: f64) -> u8 {
+    srgb_u8_thresholds().partition_point(|&v| v <= x) as u8
+}
+
+/// The thresholds of [`srgb_u8`]: for k = 1 … 255, the smallest linear value whose code is k.
+fn srgb_u8_thresholds() -> &'static [f64] {
+    static THRESHOLDS: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    let code = |x: f64| (srgb_encode(x) * 255.0 + 0.5) as u8;
+    THRESHOLDS.get_or_init(|| {
+        (1..=255u8)
+            .map(|k| {
+                let (mut lo, mut hi) = (0f64.to_bits(), 1f64.to_bits());
+                while hi - lo > 1 {
+                    let mid = lo + (hi - lo) / 2;
+                    if code(f64::from_bits(mid)) >= k {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                f64::from_bits(hi)
+            })
+            .collect()
+    })
+}
+
 /// Linear value of an sRGB-encoded value in [0, 1].
 pub fn srgb_decode(y: f64) -> f64 {
     let y = y.clamp(0.0, 1.0);
@@ -116,6 +146,25 @@ pub fn write_8bit(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The tabulated 8-bit code equals the encoding's, at a million points, on both sides of every
+    /// threshold (each code's first value and the value below it), and outside [0, 1].
+    #[test]
+    fn srgb_u8_equals_the_encoding() {
+        let direct = |x: f64| (srgb_encode(x) * 255.0 + 0.5) as u8;
+        for i in 0..=1_000_000 {
+            let x = i as f64 / 1e6;
+            assert_eq!(srgb_u8(x), direct(x), "{x}");
+        }
+        for (k, &t) in (1..=255u8).zip(srgb_u8_thresholds()) {
+            let below = f64::from_bits(t.to_bits() - 1);
+            assert_eq!((srgb_u8(t), direct(t)), (k, k), "{t}");
+            assert_eq!((srgb_u8(below), direct(below)), (k - 1, k - 1), "{below}");
+        }
+        for x in [-1.0, 0.0, 1.0, 2.0, f64::NAN] {
+            assert_eq!(srgb_u8(x), direct(x), "{x}");
+        }
+    }
 
     #[test]
     fn srgb_round_trip() {
