@@ -18,7 +18,7 @@ pub mod silhouette;
 use crate::camera::outline::{Outline, Projection};
 use crate::camera::sphere::EllipseJson;
 use crate::error::{Error, Result};
-use crate::formats::photo::{load_linear_rgb, LinearRgb};
+use crate::formats::photo::{Decoded, LinearRgb};
 use crate::formats::session::{self, LightMode, Session, SessionReport};
 use crate::model::LightAngles;
 use found::locate_highlights;
@@ -465,7 +465,7 @@ impl Photo<'_> {
 /// the edge model's light-dependent errors average out (photometric-stereo sets). `per_image`:
 /// each photo, its luminance and its silhouettes.
 pub(crate) fn pool_static_spheres(
-    per_image: &mut [(LinearRgb, Plane, Vec<Silhouette>)],
+    per_image: &mut [(&LinearRgb, Plane, Vec<Silhouette>)],
     proj: &Projection,
 ) {
     if per_image.len() < 2 {
@@ -549,7 +549,7 @@ fn estimate(f: &Found) -> Option<&highlight::Highlight> {
 }
 
 impl Lights {
-    fn of(per_image: &[(LinearRgb, Vec<Found>)], mode: LightMode) -> Lights {
+    fn of(per_image: &[(&LinearRgb, Vec<Found>)], mode: LightMode) -> Lights {
         let image: Vec<Option<highlight::Combined>> = per_image
             .iter()
             .map(|(_, fs)| {
@@ -609,29 +609,29 @@ impl Lights {
     }
 }
 
-/// Each photo decoded, its spheres found, and the outlines of spheres that stayed put refitted
-/// over all photos.
-fn outlines(
+/// Each photo's spheres found, and the outlines of spheres that stayed put refitted over all
+/// photos.
+fn outlines<'a>(
     report: &SessionReport,
     sess: &Session,
     proj: &Projection,
+    images: &'a [LinearRgb],
     quiet: bool,
-) -> Result<Vec<(LinearRgb, Plane, Vec<Silhouette>)>> {
+) -> Result<Vec<(&'a LinearRgb, Plane, Vec<Silhouette>)>> {
     let pb = crate::progress::bar(report.images.len() as u64, "detect", quiet);
-    let per_image: Vec<Result<(LinearRgb, Plane, Vec<Silhouette>)>> = report
-        .images
+    let per_image: Vec<Result<(&LinearRgb, Plane, Vec<Silhouette>)>> = images
         .par_iter()
+        .zip(&report.images)
         .zip(&sess.images)
-        .map(|(info, si)| {
-            let img = load_linear_rgb(&info.path, si.linear)?;
-            let lum = luminance(&img);
-            let f = find_spheres(&img, &lum, proj, &si.spheres, &info.path)?;
+        .map(|((img, info), si)| {
+            let lum = luminance(img);
+            let f = find_spheres(img, &lum, proj, &si.spheres, &info.path)?;
             pb.inc(1);
             Ok((img, lum, f))
         })
         .collect();
     pb.finish_and_clear();
-    let mut per_image: Vec<(LinearRgb, Plane, Vec<Silhouette>)> =
+    let mut per_image: Vec<(&LinearRgb, Plane, Vec<Silhouette>)> =
         per_image.into_iter().collect::<Result<_>>()?;
     pool_static_spheres(&mut per_image, proj);
     Ok(per_image)
@@ -699,6 +699,20 @@ pub fn run(opts: &Options) -> Result<Detections> {
     let t0 = std::time::Instant::now();
     let report = session::inspect(&opts.session)?;
     let (sess, _) = Session::load(&report.session_file)?;
+    let decoded = report.decode(&sess)?;
+    let inputs = crate::formats::fingerprint::of_files(&report.input_files())?;
+    run_decoded(opts, (&report, &sess), &decoded, inputs, t0)
+}
+
+/// [`run`] on a session already inspected and loaded, its photos decoded and its inputs'
+/// fingerprints taken (`workbench solve` shares them with the fit), started at `t0`.
+pub fn run_decoded(
+    opts: &Options,
+    (report, sess): (&SessionReport, &Session),
+    decoded: &Decoded,
+    inputs: crate::formats::fingerprint::Inputs,
+    t0: std::time::Instant,
+) -> Result<Detections> {
     let proj = match &report.camera {
         Some(c) => Projection::Perspective(*c),
         None => Projection::Orthographic,
@@ -707,12 +721,12 @@ pub fn run(opts: &Options) -> Result<Detections> {
         .out
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
-    let per_image = outlines(&report, &sess, &proj, opts.quiet)?;
+    let per_image = outlines(report, sess, &proj, &decoded.images, opts.quiet)?;
     // Highlights once the outlines are final.
-    let per_image: Vec<(LinearRgb, Vec<Found>)> = per_image
+    let per_image: Vec<(&LinearRgb, Vec<Found>)> = per_image
         .into_par_iter()
         .map(|(img, lum, sil)| {
-            let found = locate_highlights(&img, &lum, &proj, sil);
+            let found = locate_highlights(img, &lum, &proj, sil);
             (img, found)
         })
         .collect();
@@ -781,7 +795,7 @@ pub fn run(opts: &Options) -> Result<Detections> {
         light_elevation_deg: angles.map(|a| a.elevation.to_degrees()),
         images,
         seconds: t0.elapsed().as_secs_f64(),
-        inputs: crate::formats::fingerprint::of_files(&report.input_files())?,
+        inputs,
     };
     crate::formats::output::write_json(&out, &det)?;
     set.commit()?;

@@ -26,7 +26,7 @@ use crate::detect::samples::{self, Sample};
 use crate::error::{Error, Result};
 use crate::fit::solver::Obs;
 use crate::formats::detections::{Detections, SphereDetection};
-use crate::formats::photo::{load_linear_rgb, LinearRgb};
+use crate::formats::photo::{Decoded, LinearRgb};
 use crate::formats::session::{ImageInfo, Session, SessionReport};
 use crate::model::Geometry;
 use nalgebra::Vector3;
@@ -317,10 +317,11 @@ pub(crate) const IMPULSE_FRACTION: f64 = 0.2;
 /// … within the highlight, where the lobe itself changes fast from pixel to pixel.
 pub(crate) const IMPULSE_FRACTION_HIGHLIGHT: f64 = 0.5;
 
-/// Decode the session's photos and collect the observations of every sphere of `det`, with
-/// θ and the highlight flag from each photo's light in `lights` (one per photo, or one for all;
-/// and the highlight radius `highlight_radius`). With `frame`, each photo's normals and view
-/// vectors are turned by its rotation (see [`light_frames`]).
+/// Collect the observations of every sphere of `det` from the session's photos (`decoded`, or
+/// decoded here when `None`), with θ and the highlight flag from each photo's light in `lights`
+/// (one per photo, or one for all; and the highlight radius `highlight_radius`). With `frame`,
+/// each photo's normals and view vectors are turned by its rotation (see [`light_frames`]).
+#[allow(clippy::too_many_arguments)]
 pub fn observe(
     report: &SessionReport,
     sess: &Session,
@@ -329,17 +330,19 @@ pub fn observe(
     lights: &[Option<Vector3<f64>>],
     highlight_radius: Option<f64>,
     frame: Option<&[nalgebra::Rotation3<f64>]>,
+    decoded: Option<&Decoded>,
 ) -> Result<Observed> {
-    let t0 = Instant::now();
-    let images: Vec<_> = report
-        .images
-        .par_iter()
-        .zip(&sess.images)
-        .map(|(info, si)| load_linear_rgb(&info.path, si.linear))
-        .collect::<Result<_>>()?;
-    let decode_s = t0.elapsed().as_secs_f64();
+    let here;
+    let decoded = match decoded {
+        Some(d) => d,
+        None => {
+            here = report.decode(sess)?;
+            &here
+        }
+    };
+    let (images, decode_s) = (&decoded.images, decoded.seconds);
     let t1 = Instant::now();
-    let floors = dark_floors(report, sess, det, proj, &images);
+    let floors = dark_floors(report, sess, det, proj, images);
     let jobs = sphere_jobs(report, det)?;
     let spheres: Vec<SphereData> = jobs
         .par_iter()

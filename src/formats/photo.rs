@@ -293,6 +293,27 @@ impl LinearRgb {
     }
 }
 
+/// Photos decoded once, to be shared by the stages that read their pixels (detection, then the
+/// fit's samples), and the wall time the decoding took (the baseline `fit.json` times against).
+pub struct Decoded {
+    pub images: Vec<LinearRgb>,
+    pub seconds: f64,
+}
+
+/// Decode photos in parallel ([`load_linear_rgb`]; each path with its `linear` flag).
+pub fn decode_all(photos: &[(&Path, Option<bool>)]) -> Result<Decoded> {
+    use rayon::prelude::*;
+    let t = std::time::Instant::now();
+    let images = photos
+        .par_iter()
+        .map(|&(path, linear)| load_linear_rgb(path, linear))
+        .collect::<Result<_>>()?;
+    Ok(Decoded {
+        images,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
 /// Decode a photo to linear RGB: 16-bit (and float) values are taken as linear, 8-bit values as
 /// sRGB unless `linear` says otherwise. EXIF orientation is applied.
 pub fn load_linear_rgb(path: &Path, linear: Option<bool>) -> Result<LinearRgb> {

@@ -225,6 +225,17 @@ pub struct SessionReport {
 }
 
 impl SessionReport {
+    /// Every photo decoded ([`crate::formats::photo::decode_all`]), with `sess`'s linear flags.
+    pub fn decode(&self, sess: &Session) -> Result<crate::formats::photo::Decoded> {
+        let photos: Vec<(&Path, Option<bool>)> = self
+            .images
+            .iter()
+            .zip(&sess.images)
+            .map(|(info, si)| (info.path.as_path(), si.linear))
+            .collect();
+        crate::formats::photo::decode_all(&photos)
+    }
+
     /// The files a session's results depend on: session.json, the photos, the intrinsics.
     pub fn input_files(&self) -> Vec<PathBuf> {
         let mut v = vec![self.session_file.clone()];

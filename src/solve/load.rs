@@ -10,6 +10,7 @@ use crate::fit::observe::{self, SphereData};
 use crate::formats::detections::{self, Detections};
 use crate::formats::fingerprint::{self, Inputs};
 use crate::formats::fit::{FitFile, Timings, SCHEMA};
+use crate::formats::photo::Decoded;
 use crate::formats::session::{self, LightMode, Session, SessionReport};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
@@ -96,7 +97,8 @@ pub(super) fn load_inspected(
     let proj = projection(&report, &mut skipped);
     let detections_path = report.session_file.with_file_name("detections.json");
     let t1 = Instant::now();
-    let detections = detections(opts, &report, &now, &detections_path, &mut skipped)?;
+    let (detections, decoded) =
+        detections(opts, (&report, &sess), &now, &detections_path, &mut skipped)?;
     timings.detect_s = t1.elapsed().as_secs_f64();
     let mut inputs = now;
     inputs.insert(
@@ -120,6 +122,7 @@ pub(super) fn load_inspected(
         },
         highlight_radius,
         frames.as_deref(),
+        decoded.as_ref(),
     )?;
     timings.decode_s = obs.decode_s;
     timings.samples_s = obs.samples_s;
@@ -245,11 +248,11 @@ fn projection(report: &SessionReport, skipped: &mut Vec<String>) -> Projection {
 /// run; said in `skipped`.
 fn detections(
     opts: &Options,
-    report: &SessionReport,
+    (report, sess): (&SessionReport, &Session),
     now: &Inputs,
     detections_path: &Path,
     skipped: &mut Vec<String>,
-) -> Result<Detections> {
+) -> Result<(Detections, Option<Decoded>)> {
     let reuse = if opts.redetect {
         Err("--redetect".to_string())
     } else {
@@ -258,17 +261,26 @@ fn detections(
     Ok(match reuse {
         Ok(d) => {
             skipped.push("detection: detections.json reused (its inputs unchanged)".into());
-            d
+            (d, None)
         }
         Err(why) => {
-            let d = detect::run(&detect::Options {
-                session: report.session_file.clone(),
-                out: None,
-                overlays: true,
-                quiet: opts.quiet,
-            })?;
+            // The photos decoded once: detection reads them, then the fit's samples.
+            let t = Instant::now();
+            let decoded = report.decode(sess)?;
+            let d = detect::run_decoded(
+                &detect::Options {
+                    session: report.session_file.clone(),
+                    out: None,
+                    overlays: true,
+                    quiet: opts.quiet,
+                },
+                (report, sess),
+                &decoded,
+                now.clone(),
+                t,
+            )?;
             skipped.push(format!("detection: ran ({why})"));
-            d
+            (d, Some(decoded))
         }
     })
 }
