@@ -591,6 +591,28 @@ fn an_unchanged_rerun_reuses_fit_json() {
     assert!(!again.skipped.iter().any(|s| s.starts_with("solve:")));
 }
 
+/// On a fresh folder the fit takes the photos detection decoded; with detections.json reused it
+/// decodes them itself: the two fits are the same to the bit.
+#[test]
+fn the_photos_decoded_once_fit_as_decoded_apart() {
+    let guard = default_session();
+    let dir = guard.path();
+    let no_jackknife =
+        |o: &mut Options| o.fit.jackknife = workbench::fit::joint::JackknifeMethod::Off;
+    let shared = solve_with(dir, "fit-shared.json", no_jackknife);
+    let apart = solve_with(dir, "fit-apart.json", no_jackknife);
+    let said = |f: &FitFile, what: &str| f.skipped.iter().any(|s| s.contains(what));
+    assert!(said(&shared, "detection: ran"), "{:?}", shared.skipped);
+    assert!(
+        said(&apart, "detections.json reused"),
+        "{:?}",
+        apart.skipped
+    );
+    assert_eq!(shared.parameters, apart.parameters);
+    assert_eq!(shared.rmse, apart.rmse);
+    assert!(shared.timings.decode_s > 0.0 && apart.timings.decode_s > 0.0);
+}
+
 /// `"light": "per-image"`: three spheres, each photographed under its own light, recover σ0 as
 /// well as the same three under one light, and each photo's light is its own.
 #[test]
