@@ -256,7 +256,9 @@ impl Fit {
         }
     }
 
-    /// Residuals with the linear terms (cubic trend, amplitude) solved; also returns them.
+    /// Residuals with the linear terms (cubic trend, amplitude) solved, without derivatives:
+    /// the tests' reference for [`Fit::residuals_and_jacobian`].
+    #[cfg(test)]
     fn residuals(&self, pix: &[Px], x: &Vector3<f64>) -> Option<(DVector<f64>, Lin)> {
         let (l, alpha) = (self.light(x), x.z.exp());
         let rows: Vec<Lin> = pix.iter().map(|p| self.row(p, &l, alpha, None).0).collect();
@@ -268,10 +270,11 @@ impl Fit {
         Some((r, c))
     }
 
-    /// [`Fit::residuals`] and their Jacobian along (the two angles, ln α), exact for the
-    /// variable projection (Golub and Pereyra): with G = AᵀA over the rows that entered the
-    /// linear solve, ∂c = G⁻¹(∂Aᵀ r − Aᵀ ∂A c) and ∂rᵢ = −(∂aᵢ·c + aᵢ·∂c), zero where a clipped
-    /// pixel's residual is (docs/commands.md, "`detect`: how, per photo", step 4).
+    /// The residuals, the linear terms (trend, amplitude) solved and returned, and their
+    /// Jacobian along (the two angles, ln α), exact for the variable projection (Golub and
+    /// Pereyra): with G = AᵀA over the rows that entered the linear solve,
+    /// ∂c = G⁻¹(∂Aᵀ r − Aᵀ ∂A c) and ∂rᵢ = −(∂aᵢ·c + aᵢ·∂c), zero where a clipped pixel's
+    /// residual is (docs/commands.md, "`detect`: how, per photo", step 4).
     fn residuals_and_jacobian(
         &self,
         pix: &[Px],
@@ -338,15 +341,15 @@ fn solve(fit: &Fit, pix: &[Px], mut x: Vector3<f64>) -> Option<Solution> {
             {
                 return None;
             }
-            let (rt, _) = fit.residuals(pix, &xt)?;
-            Some((rt.norm_squared(), (xt, step.norm() < 1e-9)))
+            // The Jacobian with the trial's residuals: most trials are accepted, and the point
+            // is not solved twice.
+            let (rt, ct, jt) = fit.residuals_and_jacobian(pix, &xt)?;
+            Some((rt.norm_squared(), (xt, rt, ct, jt, step.norm() < 1e-9)))
         });
-        let Some((c2, (xt, small))) = accepted else {
+        let Some((c2, (xt, rt, ct, jt, small))) = accepted else {
             break;
         };
-        x = xt;
-        cost = c2;
-        (r, c, j) = fit.residuals_and_jacobian(pix, &x)?;
+        (x, r, c, j, cost) = (xt, rt, ct, jt, c2);
         if small {
             break;
         }

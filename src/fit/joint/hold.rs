@@ -97,10 +97,10 @@ pub(crate) const HOLD_STEPS: u32 = 16;
 /// problem with the light's angles fixed ([`newton::iterate`]: the Huber weights taken again at
 /// each step), until a step moves no parameter by more than [`newton::STEP_TOL`] of its formal
 /// standard error. `None` — the whole fit is repeated — where they do not settle within
-/// [`HOLD_STEPS`], or stop contracting ([`newton::iterate`]) (a light far from the pulled one: Levenberg–Marquardt on the same problem from
-/// the fit was measured to land 2.8 std from the repeated fit on the jade session, whose light
-/// was pulled 3°), or leave a parameter undetermined (the whole fit's identifiability rounds
-/// would hold it).
+/// [`HOLD_STEPS`] or stop contracting ([`newton::iterate`]; a light far from the pulled one:
+/// Levenberg–Marquardt on the same problem from the fit was measured to land 2.8 std from the
+/// repeated fit on the jade session, whose light was pulled 3°), or leave a parameter
+/// undetermined (the whole fit's identifiability rounds would hold it).
 fn held_from_the_fit(
     jf: &JointFit,
     light: LightAngles,
