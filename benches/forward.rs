@@ -67,6 +67,16 @@ fn bench_kernels(c: &mut Criterion) {
                     .sum::<f64>()
             })
         });
+        // The same from the table's slice at that width (what the fit evaluates).
+        let slice = table.slice(sigma).expect("a tabulated width");
+        g.bench_function(format!("{name}_slice"), |b| {
+            b.iter(|| {
+                thetas
+                    .iter()
+                    .map(|&t| black_box(&slice).eval(t).value)
+                    .sum::<f64>()
+            })
+        });
     }
     let geo = samples(n);
     let model = Model::default();

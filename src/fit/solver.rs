@@ -16,7 +16,7 @@
 //! those of the fit with the floor free; the floor itself is −(wᵀr)/(wᵀw) (docs/pipeline.md, "The
 //! dark floor").
 
-use crate::model::{idx, Geometry, Model, Params, N_PARAMS};
+use crate::model::{idx, Geometry, Model, Params, Prepared, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
@@ -256,6 +256,13 @@ impl ChunkSums {
 }
 
 impl Problem<'_> {
+    /// The model at `params` for this problem's observations (the light's frame and the CDRF
+    /// table's slices at their radii, computed once per evaluation).
+    fn prepared(&self, params: &Params) -> Prepared {
+        self.model
+            .prepare(params, self.obs.iter().map(|o| o.geometry.radius_mm))
+    }
+
     fn free_idx(&self) -> Vec<usize> {
         (0..N_PARAMS).filter(|&k| self.free[k]).collect()
     }
@@ -269,16 +276,14 @@ impl Problem<'_> {
     pub fn evaluate(&self, want_jacobian: bool) -> (DVector<f64>, Option<DMatrix<f64>>) {
         let (p, dpdu) = from_unbounded(&self.u);
         let params = Params::from_vec(&p);
-        let frame = params.light.frame();
+        let prepared = self.prepared(&params);
         let free = self.free_idx();
         let n = free.len();
         let rows: Vec<([f64; 3], Vec<f64>)> = self
             .obs
             .par_iter()
             .map(|o| {
-                let (l, g) = self
-                    .model
-                    .radiance_with_gradient_in(&params, &frame, &o.geometry);
+                let (l, g) = prepared.radiance_with_gradient(&o.geometry);
                 let r = [0, 1, 2].map(|c| o.weight[c] * (l[c] - o.radiance[c]));
                 let mut j = vec![];
                 if want_jacobian {
@@ -494,8 +499,7 @@ impl Problem<'_> {
     /// observations, in parallel chunks, summed in chunk order (the same result on every run).
     pub fn grouped_sums(&self, groups: Option<(&[usize], usize)>) -> Vec<RawNormal> {
         let (p, dpdu) = from_unbounded(&self.u);
-        let params = Params::from_vec(&p);
-        let frame = params.light.frame();
+        let prepared = self.prepared(&Params::from_vec(&p));
         let free = self.free_idx();
         let n = free.len();
         let floor = self.floor;
@@ -525,9 +529,7 @@ impl Problem<'_> {
                 let mut g = [0.0; MAX_ROW];
                 for (i, o) in chunk.iter().enumerate() {
                     let a = &mut acc[groups.map_or(0, |g| g.0[ci * CHUNK + i])];
-                    let (l, grad) =
-                        self.model
-                            .radiance_with_gradient_in(&params, &frame, &o.geometry);
+                    let (l, grad) = prepared.radiance_with_gradient(&o.geometry);
                     for ch in 0..3 {
                         let w = o.weight[ch];
                         if w == 0.0 {

@@ -3,7 +3,7 @@
 
 use crate::model::cdrf::Convolution;
 use crate::model::cdrf::{self, eval_series, CdrfEval, Series, SeriesEval};
-use crate::model::table::Table;
+use crate::model::table::{Slice, Table};
 
 /// The CDRF with a kernel of two Gaussians, (1 − w)·f(θ; σ) + w·f(θ; s·σ): a weight w ∈ [0, 1)
 /// moved to a Gaussian s > 1 times wider (docs/kernel.md). Sums of Gaussians approximate
@@ -21,29 +21,41 @@ pub struct MixtureEval {
     pub d_param: f64,
 }
 
+/// How each Gaussian's CDRF is evaluated: the closed form of a convolution, or the wrapped form
+/// from its table ([`Table`]) — from the table's slices at the core's and the tail's widths where
+/// the caller has them ([`Table::slice`]; each used only at the σ it holds).
+#[derive(Clone, Copy)]
+pub(crate) enum Blur<'a> {
+    Closed(Convolution),
+    Table([Option<&'a Slice>; 2]),
+}
+
 /// [`MixtureEval`] at (θ, σ) for weight `w` and width ratio `s`, blurring the clamped cosine
-/// (`source` None) or a [`Series`].
+/// (`source` None) or a [`Series`] (whose terms have no table: [`Blur::Table`] is then the wrapped
+/// closed form).
 pub(crate) fn eval(
     theta: f64,
     sigma: f64,
-    w: f64,
-    s: f64,
+    (w, s): (f64, f64),
     source: Option<&Series>,
-    conv: Convolution,
-    tabulated: bool,
+    blur: Blur,
 ) -> MixtureEval {
-    let table = (tabulated && conv == Convolution::Wrapped).then(Table::shared);
-    let one = |sig: f64| match source {
-        None => SeriesEval {
-            f: match table {
-                Some(t) => t.eval(theta, sig),
-                None => cdrf::eval(theta, sig, conv),
+    let one = |sig: f64, k: usize| match (source, blur) {
+        (None, Blur::Table(slices)) => SeriesEval {
+            f: match slices[k] {
+                Some(sl) if sl.sigma == sig => sl.eval(theta),
+                _ => Table::shared().eval(theta, sig),
             },
             d_param: 0.0,
         },
-        Some(series) => eval_series(theta, sig, series, conv),
+        (None, Blur::Closed(conv)) => SeriesEval {
+            f: cdrf::eval(theta, sig, conv),
+            d_param: 0.0,
+        },
+        (Some(series), Blur::Closed(conv)) => eval_series(theta, sig, series, conv),
+        (Some(series), Blur::Table(_)) => eval_series(theta, sig, series, Convolution::Wrapped),
     };
-    let core = one(sigma);
+    let core = one(sigma, 0);
     if w == 0.0 {
         return MixtureEval {
             f: core.f,
@@ -52,7 +64,7 @@ pub(crate) fn eval(
             d_param: core.d_param,
         };
     }
-    let tail = one(s * sigma);
+    let tail = one(s * sigma, 1);
     let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
     MixtureEval {
         f: CdrfEval {

@@ -22,8 +22,9 @@
 use crate::model::cdrf::Convolution;
 use crate::model::entry;
 use crate::model::fresnel;
-use crate::model::mixture;
+use crate::model::mixture::{self, Blur};
 use crate::model::specular;
+use crate::model::table::{Slice, Table};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -100,7 +101,7 @@ pub struct SpecularParams {
 }
 
 /// A light's direction l and its derivatives ∂l/∂azimuth, ∂l/∂elevation ([`LightAngles::frame`]):
-/// what every pixel of one evaluation shares.
+/// what every pixel of one evaluation shares ([`Prepared`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightFrame {
     pub l: Vector3<f64>,
@@ -298,13 +299,84 @@ impl Model {
     /// The blur profile at θ for a core width σ: one Gaussian or two, of the clamped cosine or
     /// of the transmitted irradiance (`entry_fresnel`, its `d_param` then ∂/∂η).
     pub(crate) fn profile(&self, m: &Material, theta: f64, sigma: f64) -> mixture::MixtureEval {
+        self.profile_with(m, theta, sigma, [None, None])
+    }
+
+    /// [`Self::profile`] with the table's slices at the core's and the tail's widths, where the
+    /// caller has them ([`Prepared`]).
+    fn profile_with(
+        &self,
+        m: &Material,
+        theta: f64,
+        sigma: f64,
+        slices: [Option<&Slice>; 2],
+    ) -> mixture::MixtureEval {
         let (w, s, conv) = (m.kernel_weight, m.kernel_ratio, self.convolution);
         if self.entry_fresnel {
             entry::with_series(m.eta, |series| {
-                mixture::eval(theta, sigma, w, s, Some(series), conv, false)
+                mixture::eval(theta, sigma, (w, s), Some(series), Blur::Closed(conv))
             })
+        } else if self.tabulated && conv == Convolution::Wrapped {
+            mixture::eval(theta, sigma, (w, s), None, Blur::Table(slices))
         } else {
-            mixture::eval(theta, sigma, w, s, None, conv, self.tabulated)
+            mixture::eval(theta, sigma, (w, s), None, Blur::Closed(conv))
+        }
+    }
+
+    /// σ_c / σ0_c at a radius: (r_ref / r)^q, exactly 1 with the extension off.
+    fn sigma_scale(&self, m: &Material, radius_mm: f64) -> f64 {
+        if m.sigma_exponent == 0.0 {
+            1.0
+        } else {
+            (self.reference_radius_mm / radius_mm).powf(m.sigma_exponent)
+        }
+    }
+
+    /// The model at `p` for many pixels ([`Prepared`]): the light's frame and, with the tabulated
+    /// CDRF, the table's slices at the blur widths of each distinct radius in `radii` (the first
+    /// [`MAX_SLICED_RADII`]; pixels of other radii read the whole table).
+    pub fn prepare(&self, p: &Params, radii: impl IntoIterator<Item = f64>) -> Prepared {
+        let mut distinct: Vec<f64> = vec![];
+        let mut last = f64::NAN;
+        for r in radii {
+            if r != last && distinct.len() < MAX_SLICED_RADII && !distinct.contains(&r) {
+                distinct.push(r);
+            }
+            last = r;
+        }
+        let sliced =
+            self.tabulated && !self.entry_fresnel && self.convolution == Convolution::Wrapped;
+        let m = &p.material;
+        let table = Table::shared();
+        let slices = if sliced {
+            distinct
+                .into_iter()
+                .map(|r| {
+                    let scale = self.sigma_scale(m, r);
+                    let core: [Option<Slice>; 3] =
+                        std::array::from_fn(|c| table.slice(m.sigma0_mm[c] / r * scale));
+                    let tail: [Option<Slice>; 3] = std::array::from_fn(|c| {
+                        let sigma = m.sigma0_mm[c] / r * scale;
+                        (m.kernel_weight != 0.0)
+                            .then(|| table.slice(m.kernel_ratio * sigma))
+                            .flatten()
+                    });
+                    RadiusSlices {
+                        radius_mm: r,
+                        ln_rr: (self.reference_radius_mm / r).ln(),
+                        core,
+                        tail,
+                    }
+                })
+                .collect()
+        } else {
+            vec![]
+        };
+        Prepared {
+            model: *self,
+            params: *p,
+            frame: p.light.frame(),
+            slices,
         }
     }
 
@@ -315,23 +387,12 @@ impl Model {
             dl_da: Vector3::zeros(),
             dl_de: Vector3::zeros(),
         };
-        self.eval(p, &light, g, false).0
+        self.eval(p, &light, g, false, None).0
     }
 
     /// RGB radiance and its gradient with respect to all [`N_PARAMS`] parameters.
     pub fn radiance_with_gradient(&self, p: &Params, g: &Geometry) -> (Rgb, Gradient) {
-        self.eval(p, &p.light.frame(), g, true)
-    }
-
-    /// [`Self::radiance_with_gradient`] with the light's frame computed once for many pixels
-    /// (`light` must be `p.light.frame()`).
-    pub fn radiance_with_gradient_in(
-        &self,
-        p: &Params,
-        light: &LightFrame,
-        g: &Geometry,
-    ) -> (Rgb, Gradient) {
-        self.eval(p, light, g, true)
+        self.eval(p, &p.light.frame(), g, true, None)
     }
 
     fn eval(
@@ -340,6 +401,7 @@ impl Model {
         light: &LightFrame,
         g: &Geometry,
         want_grad: bool,
+        slices: Option<&RadiusSlices>,
     ) -> (Rgb, Gradient) {
         let mut out = [0.0; 3];
         let mut grad = [[0.0; N_PARAMS]; 3];
@@ -366,11 +428,7 @@ impl Model {
         let t_exit = fr.transmission();
         let rr = self.reference_radius_mm / g.radius_mm;
         // Off extensions scale by exactly 1, without the transcendental calls.
-        let sigma_scale = if m.sigma_exponent == 0.0 {
-            1.0
-        } else {
-            rr.powf(m.sigma_exponent)
-        };
+        let sigma_scale = self.sigma_scale(m, g.radius_mm);
         let albedo_scale = if m.albedo_curvature == 0.0 {
             1.0
         } else {
@@ -378,10 +436,19 @@ impl Model {
         };
         let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
         let (dl_da, dl_de) = (light.dl_da, light.dl_de);
-        let ln_rr = if want_grad { rr.ln() } else { 0.0 };
+        let ln_rr = match slices {
+            Some(s) => s.ln_rr,
+            None if want_grad => rr.ln(),
+            None => 0.0,
+        };
         for c in 0..3 {
             let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
-            let mix = self.profile(m, theta, sigma);
+            let mix = self.profile_with(
+                m,
+                theta,
+                sigma,
+                slices.map_or([None, None], |s| [s.core[c].as_ref(), s.tail[c].as_ref()]),
+            );
             let f = mix.f;
             let a = m.albedo[c] * albedo_scale;
             out[c] = a * t_exit * f.value + spec.value;
@@ -405,5 +472,36 @@ impl Model {
             row[idx::ELEVATION] = dl.dot(&dl_de);
         }
         (out, grad)
+    }
+}
+
+/// The most distinct radii a [`Prepared`] model holds slices for (16 KB per channel and width).
+pub const MAX_SLICED_RADII: usize = 64;
+
+/// The table's slices at one radius's blur widths, per channel: the core's σ_c and, with two
+/// Gaussians, the tail's s·σ_c (`None` outside the table, or without a tail).
+struct RadiusSlices {
+    radius_mm: f64,
+    /// ln(r_ref / r).
+    ln_rr: f64,
+    core: [Option<Slice>; 3],
+    tail: [Option<Slice>; 3],
+}
+
+/// The model at fixed parameters for many pixels ([`Model::prepare`]): what every pixel shares —
+/// the light's frame and the CDRF table's slices at each radius's widths ([`Slice`]) — computed
+/// once. Its radiance and gradient are [`Model::radiance_with_gradient`]'s, to rounding.
+pub struct Prepared {
+    model: Model,
+    params: Params,
+    frame: LightFrame,
+    slices: Vec<RadiusSlices>,
+}
+
+impl Prepared {
+    /// RGB radiance and its gradient with respect to all [`N_PARAMS`] parameters at one pixel.
+    pub fn radiance_with_gradient(&self, g: &Geometry) -> (Rgb, Gradient) {
+        let slices = self.slices.iter().find(|s| s.radius_mm == g.radius_mm);
+        self.model.eval(&self.params, &self.frame, g, true, slices)
     }
 }

@@ -9,6 +9,10 @@
 //! each node the table holds F = f, ∂F/∂τ, ∂F/∂u and ∂²F/∂τ∂u, from the closed form's value and
 //! derivatives (the cross derivative by a central difference in u of the exact ∂F/∂τ).
 //! Outside σ ∈ [[`SIGMA_MIN`], [`SIGMA_MAX`]] the closed form is evaluated instead.
+//!
+//! A fit evaluates f at a handful of widths (one per radius and channel) over many pixels: a
+//! [`Slice`] is the table interpolated in u once, at one σ, leaving a cubic Hermite in τ whose
+//! 513 nodes fit in the first-level cache — the same interpolant, summed in another order.
 
 use crate::model::cdrf::{self, CdrfEval, Convolution};
 use std::f64::consts::FRAC_PI_2;
@@ -97,6 +101,46 @@ impl Table {
         TABLE.get_or_init(Table::build)
     }
 
+    /// The table at one width σ ([`Slice`]); `None` outside the tabulated σ.
+    pub fn slice(&self, sigma: f64) -> Option<Slice> {
+        if !(SIGMA_MIN..=SIGMA_MAX).contains(&sigma) {
+            return None;
+        }
+        let y = (sigma.ln() - self.u_min) / self.h_u;
+        let j = (y as usize).min(N_U - 2);
+        let t = y - j as f64;
+        let (t2, t3) = (t * t, t * t * t);
+        let ht = [2.0 * t3 - 3.0 * t2 + 1.0, -2.0 * t3 + 3.0 * t2];
+        let gt = [t3 - 2.0 * t2 + t, t3 - t2];
+        let dht = [6.0 * t2 - 6.0 * t, -6.0 * t2 + 6.0 * t];
+        let dgt = [3.0 * t2 - 4.0 * t + 1.0, 3.0 * t2 - 2.0 * t];
+        let (a, b) = (self.h_tau, self.h_u);
+        let nodes = (0..N_TAU)
+            .map(|i| {
+                // Per τ node: the value and its τ-slope (in units of the cell, ·h_τ) interpolated
+                // in u, and the same of their u-derivative (in units of the cell, ·h_u).
+                let mut out = [0.0; 4];
+                for cj in 0..2 {
+                    let n = &self.nodes[(j + cj) * N_TAU + i];
+                    let (f, ft, fu, ftu) = (n[0], n[1] * a, n[2] * b, n[3] * a * b);
+                    out[0] += f * ht[cj] + fu * gt[cj];
+                    out[1] += ft * ht[cj] + ftu * gt[cj];
+                    out[2] += f * dht[cj] + fu * dgt[cj];
+                    out[3] += ft * dht[cj] + ftu * dgt[cj];
+                }
+                out
+            })
+            .collect();
+        Some(Slice {
+            sigma,
+            nodes,
+            inv_sigma: 1.0 / sigma,
+            tau_max: self.tau_max,
+            inv_h_tau: 1.0 / a,
+            inv_h_u: 1.0 / b,
+        })
+    }
+
     /// f, ∂f/∂θ and ∂f/∂σ (∂²f/∂θ² as (∂f/∂σ)/σ, the diffusion equation's) at θ ∈ [0, π]; the
     /// closed form outside the tabulated σ.
     pub fn eval(&self, theta: f64, sigma: f64) -> CdrfEval {
@@ -158,6 +202,59 @@ impl Table {
             value: v,
             d_theta,
             d2_theta: d_sigma / sigma,
+            d_sigma,
+        }
+    }
+}
+
+/// The table at one blur width σ ([`Table::slice`]): per τ node, the bicubic interpolant's value
+/// and τ-slope already interpolated in u, and their u-derivatives. [`Slice::eval`] is then the
+/// cubic in τ of [`Table::eval`] at that σ, the same function to rounding.
+pub struct Slice {
+    /// The width it holds (radians).
+    pub sigma: f64,
+    /// `nodes[i]` = [F, h_τ·F_τ, h_u·F_u, h_τ·h_u·F_τu] at τ_i, interpolated to σ in u.
+    nodes: Vec<[f64; 4]>,
+    inv_sigma: f64,
+    tau_max: f64,
+    inv_h_tau: f64,
+    inv_h_u: f64,
+}
+
+impl Slice {
+    /// [`Table::eval`] at (θ, [`Slice::sigma`]): f, ∂f/∂θ, ∂²f/∂θ² (as (∂f/∂σ)/σ) and ∂f/∂σ; the
+    /// closed form outside θ ∈ [0, π].
+    #[inline]
+    pub fn eval(&self, theta: f64) -> CdrfEval {
+        let sigma = self.sigma;
+        if !(0.0..=std::f64::consts::PI).contains(&theta) {
+            return cdrf::eval(theta, sigma, Convolution::Wrapped);
+        }
+        // As Table::eval, with the divisions by σ and the node spacings as multiplications.
+        let z = (theta - FRAC_PI_2) * self.inv_sigma;
+        let r = (z * z + 1.0).sqrt();
+        let tau = (z.abs() + r).ln().copysign(z);
+        let tau_theta = self.inv_sigma / r;
+        let tau_sigma = -z * tau_theta;
+        let x = (tau + self.tau_max) * self.inv_h_tau;
+        let i = (x as usize).min(N_TAU - 2);
+        let s = x - i as f64;
+        let (s2, s3) = (s * s, s * s * s);
+        let hs = [2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2];
+        let gs = [s3 - 2.0 * s2 + s, s3 - s2];
+        let dhs = [6.0 * s2 - 6.0 * s, -6.0 * s2 + 6.0 * s];
+        let dgs = [3.0 * s2 - 4.0 * s + 1.0, 3.0 * s2 - 2.0 * s];
+        let (n0, n1) = (&self.nodes[i], &self.nodes[i + 1]);
+        let v = n0[0] * hs[0] + n0[1] * gs[0] + n1[0] * hs[1] + n1[1] * gs[1];
+        let v_s = n0[0] * dhs[0] + n0[1] * dgs[0] + n1[0] * dhs[1] + n1[1] * dgs[1];
+        let v_t = n0[2] * hs[0] + n0[3] * gs[0] + n1[2] * hs[1] + n1[3] * gs[1];
+        let (f_tau, f_u) = (v_s * self.inv_h_tau, v_t * self.inv_h_u);
+        let d_theta = f_tau * tau_theta;
+        let d_sigma = f_tau * tau_sigma + f_u * self.inv_sigma;
+        CdrfEval {
+            value: v,
+            d_theta,
+            d2_theta: d_sigma * self.inv_sigma,
             d_sigma,
         }
     }

@@ -192,27 +192,31 @@ pub(crate) fn resolution_notes(
     let (r_min, r_max) = spheres.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
         (a.min(s.radius_mm), b.max(s.radius_mm))
     });
-    let mut limits = resolution_limits(
+    // Below a pixel: the blur σ = σ0/r is smaller than one pixel's angle on the sphere (1/R for a
+    // sphere R pixels in radius) on every sphere, so the pixels' own footprint hides it. Such a
+    // channel is a bound whatever the refits below would say: they are left out for it.
+    let mut limits: Vec<(usize, Bound)> = (0..3)
+        .filter_map(|c| {
+            let s0 = fit.params.material.sigma0_mm[c];
+            let finest = spheres
+                .iter()
+                .filter(|s| s.pixels > 0)
+                .map(|s| (s0 / s.radius_mm) * (s.pixels as f64 / std::f64::consts::PI).sqrt())
+                .fold(0.0, f64::max);
+            (fit.free[idx::SIGMA0 + c] && finest < 1.0).then_some((c, Bound::Pixel(finest)))
+        })
+        .collect();
+    let bounded: Vec<usize> = limits.iter().map(|l| l.0).collect();
+    limits.extend(resolution_limits(
         setup.model(),
         final_obs,
         fit,
         priors,
         setup.measured.fit_floor,
         (r_min, r_max),
-    );
-    // Below a pixel: the blur σ = σ0/r is smaller than one pixel's angle on the sphere (1/R for a
-    // sphere R pixels in radius) on every sphere, so the pixels' own footprint hides it.
-    for c in 0..3 {
-        let s0 = fit.params.material.sigma0_mm[c];
-        let finest = spheres
-            .iter()
-            .filter(|s| s.pixels > 0)
-            .map(|s| (s0 / s.radius_mm) * (s.pixels as f64 / std::f64::consts::PI).sqrt())
-            .fold(0.0, f64::max);
-        if fit.free[idx::SIGMA0 + c] && finest < 1.0 && !limits.iter().any(|l| l.0 == c) {
-            limits.push((c, Bound::Pixel(finest)));
-        }
-    }
+        &bounded,
+    ));
+    limits.sort_by_key(|l| l.0);
     for (c, bound) in limits {
         let v = fit.params.material.sigma0_mm[c];
         let (what, test) = match bound {
@@ -256,7 +260,8 @@ enum Bound {
 /// Channels whose σ0 the data cannot tell from 0 or ∞: for each channel with σ0/r_max small or
 /// σ0/r_min large, the fit is repeated (plain least squares) with that σ0 held at 10⁻⁶ mm or
 /// 10⁶ mm, and the cost compared with the free refit's in units of the residual variance.
-/// `floor`: the dark floor is fitted ([`crate::fit::joint::Measured::fit_floor`]); `radii`: the smallest and largest.
+/// `floor`: the dark floor is fitted ([`crate::fit::joint::Measured::fit_floor`]); `radii`: the
+/// smallest and largest; `bounded`: channels already known to be bounds, not checked.
 fn resolution_limits(
     model: Model,
     obs: &[Obs],
@@ -264,11 +269,12 @@ fn resolution_limits(
     priors: &[Prior],
     floor: bool,
     (r_min, r_max): (f64, f64),
+    bounded: &[usize],
 ) -> Vec<(usize, Bound)> {
     let s0 = fit.params.material.sigma0_mm;
     let suspects: Vec<(usize, bool)> = (0..3)
         .filter_map(|c| {
-            if !fit.free[idx::SIGMA0 + c] {
+            if !fit.free[idx::SIGMA0 + c] || bounded.contains(&c) {
                 None
             } else if s0[c] / r_max < SIGMA_CHECK.0 {
                 Some((c, true))

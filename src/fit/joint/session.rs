@@ -45,12 +45,24 @@ pub fn fit_session(
     let mut skipped = vec![];
     let (ext, model_choice, model_choice_s) =
         extensions(settings, measured, fitted, &mut skipped, notes);
+    // The resolution check waits for the fit that stands: a light held after a pull replaces
+    // this fit with one that runs its own.
+    let setup = Setup::new(settings, measured, ext, settings.reduction);
     let first = fit_joint(
-        &Setup::new(settings, measured, ext, settings.reduction),
+        &Setup {
+            checks: false,
+            ..setup
+        },
         fitted,
     );
     let held = hold_pulled_light(settings, measured, fitted, ext, first, notes);
-    let (jf, settings) = (held.fit, held.settings);
+    let (mut jf, settings) = (held.fit, held.settings);
+    let t = Instant::now();
+    if !jf.resolution_checked {
+        jf.check_resolution(&setup, fitted);
+        jf.phases
+            .push(("resolution check".into(), t.elapsed().as_secs_f64()));
+    }
     let jack = if settings.jackknife != JackknifeMethod::Off {
         let j = match settings.jackknife {
             JackknifeMethod::Refit => jackknife_refit(

@@ -76,6 +76,35 @@ pub struct JointFit {
     pub chi2_dof: f64,
     /// The final stage's least-squares problem, for what is computed from its linearisation.
     pub problem: FinalProblem,
+    /// σ0 was checked against the limits of what the data resolve ([`JointFit::check_resolution`]).
+    pub resolution_checked: bool,
+}
+
+impl JointFit {
+    /// σ0 against the limits of what the data resolve ([`resolution_notes`]: refits with σ0 → 0
+    /// or → ∞), once: the statuses and notes of the channels that are bounds, not measurements.
+    /// A fit that another replaces (the pulled light's, before the hold) skips it.
+    pub(crate) fn check_resolution(&mut self, setup: &Setup, spheres: &[&SphereData]) {
+        if self.resolution_checked {
+            return;
+        }
+        let before = self.notes.len();
+        resolution_notes(
+            setup,
+            spheres,
+            &self.problem.obs,
+            &self.fit,
+            &self.problem.priors,
+            &mut self.status,
+            &mut self.notes,
+        );
+        let mut seen: std::collections::HashSet<String> =
+            self.notes[..before].iter().cloned().collect();
+        let added = self.notes.split_off(before);
+        self.notes
+            .extend(added.into_iter().filter(|n| seen.insert(n.clone())));
+        self.resolution_checked = true;
+    }
 }
 
 /// The observations the final stage fitted, with its robust weights (`weighted`) and without
@@ -175,17 +204,6 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         &mut stages,
         &mut notes,
     );
-    if setup.checks {
-        resolution_notes(
-            setup,
-            spheres,
-            &final_obs,
-            &fit,
-            &priors,
-            &mut status,
-            &mut notes,
-        );
-    }
     notes.extend(checks::clipped(spheres));
     let fit = degenerate_check(fit, &mut stages, &mut notes);
     let (chi2, quality) = fit_notes(&fit, spheres, setup.settings.eta_prior, &status[idx::ETA]);
@@ -205,8 +223,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     // Each note once (the identifiability rounds repeat theirs).
     let mut seen = std::collections::HashSet::new();
     notes.retain(|n| seen.insert(n.clone()));
-    JointFit {
-        phases: laps.phases,
+    let mut jf = JointFit {
+        phases: laps.phases.clone(),
         fit,
         model,
         stages,
@@ -228,7 +246,14 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             sphere: final_sphere,
             priors: fit_priors,
         },
+        resolution_checked: false,
+    };
+    if setup.checks {
+        jf.check_resolution(setup, spheres);
+        laps.lap("resolution check");
+        jf.phases = laps.phases;
     }
+    jf
 }
 
 /// The pixels pooled around a light: in (θ, φ) cells, those within the detector's highlight
