@@ -88,13 +88,31 @@ fn bench_kernels(c: &mut Criterion) {
                 .sum::<f64>()
         })
     });
-    g.bench_function("model_rgb_with_gradient", |b| {
-        b.iter(|| {
-            geo.iter()
-                .map(|gm| model.radiance_with_gradient(black_box(&params), gm).1[0][0])
-                .sum::<f64>()
-        })
+    // The fit's path: the model prepared at the parameters (the table's slices at each radius's
+    // widths), on the points as above and sorted as a fit's are (by sphere, then across it).
+    let prepared = model.prepare(&params, geo.iter().map(|g| g.radius_mm));
+    let mut sorted = geo.clone();
+    sorted.sort_by(|a, b| {
+        (a.radius_mm, a.normal.z)
+            .partial_cmp(&(b.radius_mm, b.normal.z))
+            .unwrap()
     });
+    for (name, pts) in [("", &geo), ("_sorted", &sorted)] {
+        g.bench_function(format!("model_rgb_with_gradient{name}"), |b| {
+            b.iter(|| {
+                pts.iter()
+                    .map(|gm| model.radiance_with_gradient(black_box(&params), gm).1[0][0])
+                    .sum::<f64>()
+            })
+        });
+        g.bench_function(format!("model_rgb_with_gradient_prepared{name}"), |b| {
+            b.iter(|| {
+                pts.iter()
+                    .map(|gm| black_box(&prepared).radiance_with_gradient(gm).1[0][0])
+                    .sum::<f64>()
+            })
+        });
+    }
     let closed = Model {
         tabulated: false,
         ..Model::default()

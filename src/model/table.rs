@@ -35,6 +35,20 @@ pub struct Table {
     h_u: f64,
 }
 
+/// The cubic Hermite basis on a cell at s ∈ [0, 1]: the weights of the two nodes' values and of
+/// their slopes (in units of the cell), and the derivatives of both in s.
+#[inline(always)]
+fn hermite(s: f64) -> ([f64; 2], [f64; 2], [f64; 2], [f64; 2]) {
+    let s2 = s * s;
+    let s3 = s2 * s;
+    (
+        [2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2],
+        [s3 - 2.0 * s2 + s, s3 - s2],
+        [6.0 * s2 - 6.0 * s, -6.0 * s2 + 6.0 * s],
+        [3.0 * s2 - 4.0 * s + 1.0, 3.0 * s2 - 2.0 * s],
+    )
+}
+
 /// θ at (τ, u) and its derivatives ∂θ/∂τ and ∂θ/∂u.
 fn theta_of(tau: f64, u: f64) -> (f64, f64, f64) {
     let sigma = u.exp();
@@ -108,12 +122,7 @@ impl Table {
         }
         let y = (sigma.ln() - self.u_min) / self.h_u;
         let j = (y as usize).min(N_U - 2);
-        let t = y - j as f64;
-        let (t2, t3) = (t * t, t * t * t);
-        let ht = [2.0 * t3 - 3.0 * t2 + 1.0, -2.0 * t3 + 3.0 * t2];
-        let gt = [t3 - 2.0 * t2 + t, t3 - t2];
-        let dht = [6.0 * t2 - 6.0 * t, -6.0 * t2 + 6.0 * t];
-        let dgt = [3.0 * t2 - 4.0 * t + 1.0, 3.0 * t2 - 2.0 * t];
+        let (ht, gt, dht, dgt) = hermite(y - j as f64);
         let (a, b) = (self.h_tau, self.h_u);
         let nodes = (0..N_TAU)
             .map(|i| {
@@ -163,18 +172,9 @@ impl Table {
         let i = (x as usize).min(N_TAU - 2);
         let j = (y as usize).min(N_U - 2);
         let (s, t) = (x - i as f64, y - j as f64);
-        // Cubic Hermite basis in s (value weights h0, h1 of the two nodes, slope weights g0, g1)
-        // and its derivative.
-        let (s2, t2) = (s * s, t * t);
-        let (s3, t3) = (s2 * s, t2 * t);
-        let hs = [2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2];
-        let gs = [s3 - 2.0 * s2 + s, s3 - s2];
-        let dhs = [6.0 * s2 - 6.0 * s, -6.0 * s2 + 6.0 * s];
-        let dgs = [3.0 * s2 - 4.0 * s + 1.0, 3.0 * s2 - 2.0 * s];
-        let ht = [2.0 * t3 - 3.0 * t2 + 1.0, -2.0 * t3 + 3.0 * t2];
-        let gt = [t3 - 2.0 * t2 + t, t3 - t2];
-        let dht = [6.0 * t2 - 6.0 * t, -6.0 * t2 + 6.0 * t];
-        let dgt = [3.0 * t2 - 4.0 * t + 1.0, 3.0 * t2 - 2.0 * t];
+        // Cubic Hermite bases in s and in t.
+        let (hs, gs, dhs, dgs) = hermite(s);
+        let (ht, gt, dht, dgt) = hermite(t);
         let (a, b) = (self.h_tau, self.h_u);
         let (mut v, mut v_s, mut v_t) = (0.0, 0.0, 0.0);
         for cj in 0..2 {
@@ -238,12 +238,7 @@ impl Slice {
         let tau_sigma = -z * tau_theta;
         let x = (tau + self.tau_max) * self.inv_h_tau;
         let i = (x as usize).min(N_TAU - 2);
-        let s = x - i as f64;
-        let (s2, s3) = (s * s, s * s * s);
-        let hs = [2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2];
-        let gs = [s3 - 2.0 * s2 + s, s3 - s2];
-        let dhs = [6.0 * s2 - 6.0 * s, -6.0 * s2 + 6.0 * s];
-        let dgs = [3.0 * s2 - 4.0 * s + 1.0, 3.0 * s2 - 2.0 * s];
+        let (hs, gs, dhs, dgs) = hermite(x - i as f64);
         let (n0, n1) = (&self.nodes[i], &self.nodes[i + 1]);
         let v = n0[0] * hs[0] + n0[1] * gs[0] + n1[0] * hs[1] + n1[1] * gs[1];
         let v_s = n0[0] * dhs[0] + n0[1] * dgs[0] + n1[0] * dhs[1] + n1[1] * dgs[1];

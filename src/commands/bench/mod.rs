@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use std::fmt;
 use std::path::PathBuf;
 
+mod end_to_end;
 mod run;
 use run as bench;
 

@@ -4,7 +4,9 @@
 //! the joint solve at every reduction level are timed and compared with the truth. The report
 //! (`report.md`, `report.json` with schema `workbench.bench/1`, and `error-vs-time.{png,svg}`)
 //! gives each setting's time and error and the solve stage's time against decoding the photos,
-//! both measured in the same run.
+//! both measured in the same run, and what a user waits for — `solve` on a fresh folder, stage
+//! by stage, against decoding — on each session and on a many-photo session with one light per
+//! photo ([`super::end_to_end`]).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -16,6 +18,8 @@ use workbench::fit::joint::Reduction;
 use workbench::plot::{Layer, Plot, PALETTE};
 use workbench::solve::{self, Options};
 use workbench::synth::session::{self, Format, SessionConfig, SessionTruth};
+
+use super::end_to_end::{self, EndToEnd};
 
 pub(super) const SCHEMA: &str = "workbench.bench/1";
 
@@ -152,6 +156,20 @@ fn fresh_dir(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Photos of the per-image-light session: 48 as DiLiGenT's (12 with `--quick`).
+fn per_image_photos(quick: bool) -> usize {
+    if quick {
+        12
+    } else {
+        48
+    }
+}
+
+/// The per-image-light session's name.
+fn per_image_name(quick: bool) -> String {
+    format!("{} photos, a light each", per_image_photos(quick))
+}
+
 fn session_dir(opts: &BenchOptions, name: &str) -> PathBuf {
     opts.out.join("sessions").join(
         name.replace(['×', ' '], "-")
@@ -173,16 +191,15 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let t0 = Instant::now();
     let data = sessions(opts.quick);
     // Every folder it will replace is checked before any work.
-    for dir in data
-        .iter()
-        .map(|d| session_dir(opts, &d.name))
-        .chain([checkerboard_dir(opts)])
-    {
+    for dir in data.iter().map(|d| session_dir(opts, &d.name)).chain([
+        checkerboard_dir(opts),
+        session_dir(opts, &per_image_name(opts.quick)),
+    ]) {
         replaceable(&dir)?;
     }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let settings = reductions();
-    let steps = data.len() * (2 + settings.len()) + 1;
+    let steps = data.len() * (3 + settings.len()) + 2;
     let pb = workbench::progress::bar(steps as u64, "bench", opts.quiet);
     let mut rows = vec![];
     #[cfg(feature = "opencv")]
@@ -247,7 +264,13 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         if rows.iter().all(|r| r.stage != "kernel") {
             rows.extend(kernel_rows(&dir, &d.name)?);
         }
+        let e =
+            end_to_end::solve_fresh(&dir, truth.sigma0_mm, Vector3::from(truth.light_direction))?;
+        rows.extend(end_to_end_rows(&d.name, &e));
+        pb.inc(1);
     }
+    rows.extend(per_image_rows(opts, &data[0])?);
+    pb.inc(1);
     pb.finish_and_clear();
     let report = BenchReport {
         schema: SCHEMA.into(),
@@ -273,6 +296,46 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     workbench::formats::output::write_json(&json, &report)?;
     set.commit()?;
     Ok(report)
+}
+
+/// The end-to-end solve of the many-photo session with a light per photo, on the first session's
+/// camera and noise.
+fn per_image_rows(opts: &BenchOptions, first: &Data) -> Result<Vec<Row>> {
+    let name = per_image_name(opts.quick);
+    let dir = session_dir(opts, &name);
+    fresh_dir(&dir)?;
+    let (sigma0, light) =
+        end_to_end::per_image_session(&dir, per_image_photos(opts.quick), &config(first))?;
+    mark_dir(&dir)?;
+    let e = end_to_end::solve_fresh(&dir, sigma0, light)?;
+    Ok(end_to_end_rows(&name, &e))
+}
+
+/// The stages of one end-to-end solve as rows (stage "end to end"), each with the decoding of
+/// the same run; the errors on the total's row.
+fn end_to_end_rows(name: &str, e: &EndToEnd) -> Vec<Row> {
+    let row = |setting: &str, seconds: f64| Row {
+        stage: "end to end".into(),
+        data: name.into(),
+        setting: setting.into(),
+        seconds,
+        error: f64::NAN,
+        error_unit: String::new(),
+        light_error_deg: None,
+        decode_s: Some(e.decode_s),
+        observations: None,
+    };
+    vec![
+        row("detection", e.detect_s),
+        row("fit and light hold", e.solve_s),
+        row("jackknife", e.jackknife_s),
+        Row {
+            error: e.sigma0_error_pct,
+            error_unit: "σ0 %".into(),
+            light_error_deg: Some(e.light_error_deg),
+            ..row("total", e.total_s)
+        },
+    ]
 }
 
 /// The solver's kernel on a session's pixels (every one, at its fit): the model, its gradient
@@ -411,17 +474,18 @@ pub fn markdown(r: &BenchReport) -> String {
     for row in &r.rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.2} | {} {} | {} | {} |",
+            "| {} | {} | {} | {:.2} | {} | {} | {} |",
             row.stage,
             row.data,
             row.setting,
             row.seconds,
-            if row.stage == "kernel" {
-                format!("{:.1e}", row.error)
+            if row.error.is_nan() {
+                String::new()
+            } else if row.stage == "kernel" {
+                format!("{:.1e} {}", row.error, row.error_unit)
             } else {
-                format!("{:.3}", row.error)
+                format!("{:.3} {}", row.error, row.error_unit)
             },
-            row.error_unit,
             row.light_error_deg
                 .map_or(String::new(), |e| format!("{e:.3}")),
             row.observations.map_or(String::new(), |n| n.to_string())
@@ -445,7 +509,7 @@ pub fn markdown(r: &BenchReport) -> String {
     s.push_str(
         "\n| data | solve (auto) / decoding | solve (every pixel) / decoding |\n|---|---:|---:|\n",
     );
-    let names = solved(r);
+    let names = sessions_of(r, "solve");
     for n in names {
         let ratio = |setting: &str| {
             r.rows
@@ -456,15 +520,55 @@ pub fn markdown(r: &BenchReport) -> String {
         };
         let _ = writeln!(s, "| {n} | {} | {} |", ratio("auto"), ratio("every pixel"));
     }
+    s.push_str(&end_to_end_table(r));
     s
 }
 
-/// The sessions the solve ran on, in run order.
-fn solved(r: &BenchReport) -> Vec<&str> {
+/// What a user waits for: each stage of `solve` on a fresh folder against decoding its photos in
+/// the same run.
+fn end_to_end_table(r: &BenchReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::from(
+        "\n`solve` on a fresh folder, every default on, each stage against decoding the photos:\n\n\
+         | data | decoding (s) | detection | fit and light hold | jackknife | total | total (s) |\n\
+         |---|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for n in sessions_of(r, "end to end") {
+        let get = |setting: &str| {
+            r.rows
+                .iter()
+                .find(|x| x.stage == "end to end" && x.data == n && x.setting == setting)
+        };
+        // A stage of 0 s did not run (the jackknife with one radius).
+        let ratio = |setting: &str| {
+            get(setting)
+                .filter(|x| x.seconds > 0.0)
+                .and_then(|x| x.decode_s.map(|d| x.seconds / d.max(1e-9)))
+                .map_or("–".to_string(), |v| format!("{v:.0}×"))
+        };
+        let total = get("total");
+        let _ = writeln!(
+            s,
+            "| {n} | {} | {} | {} | {} | {} | {} |",
+            total
+                .and_then(|x| x.decode_s)
+                .map_or("–".to_string(), |d| format!("{d:.3}")),
+            ratio("detection"),
+            ratio("fit and light hold"),
+            ratio("jackknife"),
+            ratio("total"),
+            total.map_or("–".to_string(), |x| format!("{:.2}", x.seconds))
+        );
+    }
+    s
+}
+
+/// The sessions a stage ran on, in run order.
+fn sessions_of<'a>(r: &'a BenchReport, stage: &str) -> Vec<&'a str> {
     let mut names: Vec<&str> = r
         .rows
         .iter()
-        .filter(|x| x.stage == "solve")
+        .filter(|x| x.stage == stage)
         .map(|x| x.data.as_str())
         .collect();
     names.dedup();
@@ -478,7 +582,7 @@ fn error_vs_time(r: &BenchReport) -> Plot {
         "solve time (s)",
         "worst σ0 error against the truth (%)",
     );
-    let names = solved(r);
+    let names = sessions_of(r, "solve");
     let dx = 0.015
         * r.rows
             .iter()
@@ -553,6 +657,24 @@ mod tests {
         };
         let md = markdown(&r);
         assert!(md.contains("| d | 2.0× | 6.0× |"), "{md}");
+        let e = EndToEnd {
+            decode_s: 0.25,
+            detect_s: 1.0,
+            solve_s: 2.5,
+            jackknife_s: 0.5,
+            total_s: 4.25,
+            sigma0_error_pct: 1.0,
+            light_error_deg: 0.1,
+        };
+        let r = BenchReport {
+            rows: end_to_end_rows("e", &e),
+            ..r
+        };
+        let md = markdown(&r);
+        assert!(
+            md.contains("| e | 0.250 | 4× | 10× | 2× | 17× | 4.25 |"),
+            "{md}"
+        );
         let names: Vec<String> = reductions().into_iter().map(|r| r.0).collect();
         assert_eq!(names.first().unwrap(), "every pixel");
         assert_eq!(names.last().unwrap(), "auto");
