@@ -3,4 +3,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup-system.sh
-cargo test --locked "$@"
+# The release profile: after `scripts/demo.sh` its dependencies are built already (the test
+# profile would build them all again; docs/measurements/speed.md, "Build and suite time").
+cargo test --release --locked "$@"
