@@ -352,13 +352,13 @@ impl Model {
             distinct
                 .into_iter()
                 .map(|r| {
+                    // σ_c as `eval` computes it, to the bit: a slice serves only its own σ.
                     let scale = self.sigma_scale(m, r);
-                    let core: [Option<Slice>; 3] =
-                        std::array::from_fn(|c| table.slice(m.sigma0_mm[c] / r * scale));
-                    let tail: [Option<Slice>; 3] = std::array::from_fn(|c| {
-                        let sigma = m.sigma0_mm[c] / r * scale;
+                    let sigma: [f64; 3] = std::array::from_fn(|c| m.sigma0_mm[c] / r * scale);
+                    let core = sigma.map(|s| table.slice(s));
+                    let tail = sigma.map(|s| {
                         (m.kernel_weight != 0.0)
-                            .then(|| table.slice(m.kernel_ratio * sigma))
+                            .then(|| table.slice(m.kernel_ratio * s))
                             .flatten()
                     });
                     RadiusSlices {

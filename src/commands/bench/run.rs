@@ -38,8 +38,9 @@ pub struct Row {
     pub data: String,
     pub setting: String,
     pub seconds: f64,
-    /// The error against the truth, in `error_unit`.
-    pub error: f64,
+    /// The error against the truth, in `error_unit` (null where the row has none: a stage of an
+    /// end-to-end solve, a detection without a light).
+    pub error: Option<f64>,
     pub error_unit: String,
     /// A second error where the stage has one (the light's, degrees).
     pub light_error_deg: Option<f64>,
@@ -227,9 +228,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             data: d.name.clone(),
             setting: "default".into(),
             seconds: t.elapsed().as_secs_f64(),
-            error: light.map_or(f64::NAN, |l| {
-                l.angle(&Vector3::from(truth.light_direction)).to_degrees()
-            }),
+            error: light.map(|l| l.angle(&Vector3::from(truth.light_direction)).to_degrees()),
             error_unit: "light °".into(),
             light_error_deg: None,
             decode_s: None,
@@ -249,7 +248,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
                 data: d.name.clone(),
                 setting: name.clone(),
                 seconds: f.timings.solve_s,
-                error: 100.0 * err,
+                error: Some(100.0 * err),
                 error_unit: "σ0 %".into(),
                 light_error_deg: Some(
                     Vector3::from(f.light_direction)
@@ -319,7 +318,7 @@ fn end_to_end_rows(name: &str, e: &EndToEnd) -> Vec<Row> {
         data: name.into(),
         setting: setting.into(),
         seconds,
-        error: f64::NAN,
+        error: None,
         error_unit: String::new(),
         light_error_deg: None,
         decode_s: Some(e.decode_s),
@@ -330,7 +329,7 @@ fn end_to_end_rows(name: &str, e: &EndToEnd) -> Vec<Row> {
         row("fit and light hold", e.solve_s),
         row("jackknife", e.jackknife_s),
         Row {
-            error: e.sigma0_error_pct,
+            error: Some(e.sigma0_error_pct),
             error_unit: "σ0 %".into(),
             light_error_deg: Some(e.light_error_deg),
             ..row("total", e.total_s)
@@ -382,7 +381,7 @@ fn kernel_rows(dir: &Path, name: &str) -> Result<Vec<Row>> {
         data: name.into(),
         setting: setting.into(),
         seconds,
-        error,
+        error: Some(error),
         error_unit: "JᵀJ rel.".into(),
         light_error_deg: None,
         decode_s: None,
@@ -447,8 +446,10 @@ fn calibration_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
             data: format!("640×480, {} views", cfg.views),
             setting: name.into(),
             seconds: t.elapsed().as_secs_f64(),
-            error: 100.0
-                * ((c.fx - truth.fx).abs() / truth.fx).max((c.fy - truth.fy).abs() / truth.fy),
+            error: Some(
+                100.0
+                    * ((c.fx - truth.fx).abs() / truth.fx).max((c.fy - truth.fy).abs() / truth.fy),
+            ),
             error_unit: "fx, fy %".into(),
             light_error_deg: None,
             decode_s: None,
@@ -479,12 +480,10 @@ pub fn markdown(r: &BenchReport) -> String {
             row.data,
             row.setting,
             row.seconds,
-            if row.error.is_nan() {
-                String::new()
-            } else if row.stage == "kernel" {
-                format!("{:.1e} {}", row.error, row.error_unit)
-            } else {
-                format!("{:.3} {}", row.error, row.error_unit)
+            match row.error {
+                None => String::new(),
+                Some(e) if row.stage == "kernel" => format!("{e:.1e} {}", row.error_unit),
+                Some(e) => format!("{e:.3} {}", row.error_unit),
             },
             row.light_error_deg
                 .map_or(String::new(), |e| format!("{e:.3}")),
@@ -597,7 +596,10 @@ fn error_vs_time(r: &BenchReport) -> Plot {
             .collect();
         let color = PALETTE[k % PALETTE.len()];
         p.layers.push(Layer::Points {
-            xy: pts.iter().map(|x| (x.seconds, x.error)).collect(),
+            xy: pts
+                .iter()
+                .filter_map(|x| Some((x.seconds, x.error?)))
+                .collect(),
             color,
             size: 5,
             label: Some(n.to_string()),
@@ -605,12 +607,12 @@ fn error_vs_time(r: &BenchReport) -> Plot {
         p.layers.push(Layer::Text {
             items: pts
                 .iter()
-                .map(|x| {
-                    (
-                        (x.seconds + 2.5 * dx, x.error),
+                .filter_map(|x| {
+                    Some((
+                        (x.seconds + 2.5 * dx, x.error?),
                         x.setting.replace(" cells", ""),
                         color,
-                    )
+                    ))
                 })
                 .collect(),
             size: 12,
@@ -635,7 +637,7 @@ mod tests {
             data: "d".into(),
             setting: setting.into(),
             seconds,
-            error: 0.5,
+            error: Some(0.5),
             error_unit: "σ0 %".into(),
             light_error_deg: None,
             decode_s: decode,

@@ -57,12 +57,7 @@ pub fn fit_session(
     );
     let held = hold_pulled_light(settings, measured, fitted, ext, first, notes);
     let (mut jf, settings) = (held.fit, held.settings);
-    let t = Instant::now();
-    if !jf.resolution_checked {
-        jf.check_resolution(&setup, fitted);
-        jf.phases
-            .push(("resolution check".into(), t.elapsed().as_secs_f64()));
-    }
+    jf.check_resolution(&setup, fitted);
     let jack = if settings.jackknife != JackknifeMethod::Off {
         let j = match settings.jackknife {
             JackknifeMethod::Refit => jackknife_refit(

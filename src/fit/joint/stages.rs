@@ -82,13 +82,14 @@ pub struct JointFit {
 
 impl JointFit {
     /// σ0 against the limits of what the data resolve ([`resolution_notes`]: refits with σ0 → 0
-    /// or → ∞), once: the statuses and notes of the channels that are bounds, not measurements.
-    /// A fit that another replaces (the pulled light's, before the hold) skips it.
+    /// or → ∞), once: the statuses and notes of the channels that are bounds, not measurements,
+    /// and its seconds as the phase "resolution check". A fit that another replaces (the pulled
+    /// light's, before the hold) skips it.
     pub(crate) fn check_resolution(&mut self, setup: &Setup, spheres: &[&SphereData]) {
         if self.resolution_checked {
             return;
         }
-        let before = self.notes.len();
+        let t = std::time::Instant::now();
         resolution_notes(
             setup,
             spheres,
@@ -98,13 +99,17 @@ impl JointFit {
             &mut self.status,
             &mut self.notes,
         );
-        let mut seen: std::collections::HashSet<String> =
-            self.notes[..before].iter().cloned().collect();
-        let added = self.notes.split_off(before);
-        self.notes
-            .extend(added.into_iter().filter(|n| seen.insert(n.clone())));
+        each_once(&mut self.notes);
         self.resolution_checked = true;
+        self.phases
+            .push(("resolution check".into(), t.elapsed().as_secs_f64()));
     }
+}
+
+/// Each note once, where it first appears (the identifiability rounds repeat theirs).
+fn each_once(notes: &mut Vec<String>) {
+    let mut seen = std::collections::HashSet::new();
+    notes.retain(|n| seen.insert(n.clone()));
 }
 
 /// The observations the final stage fitted, with its robust weights (`weighted`) and without
@@ -220,11 +225,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     }
     let eta_systematic = eta_from_highlight(setup, &pooled, specular, &fit, &mut notes);
     laps.lap("joint stage");
-    // Each note once (the identifiability rounds repeat theirs).
-    let mut seen = std::collections::HashSet::new();
-    notes.retain(|n| seen.insert(n.clone()));
+    each_once(&mut notes);
     let mut jf = JointFit {
-        phases: laps.phases.clone(),
+        phases: laps.phases,
         fit,
         model,
         stages,
@@ -250,8 +253,6 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     };
     if setup.checks {
         jf.check_resolution(setup, spheres);
-        laps.lap("resolution check");
-        jf.phases = laps.phases;
     }
     jf
 }
