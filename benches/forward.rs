@@ -165,7 +165,10 @@ fn bench_normal_equations(c: &mut Criterion) {
     let n = 100_000;
     let model = Model::default();
     let params = params();
-    let obs: Vec<Obs> = samples(n)
+    // Sorted by radius, as a fit's observations are (sphere by sphere).
+    let mut geometry = samples(n);
+    geometry.sort_by(|a, b| a.radius_mm.total_cmp(&b.radius_mm));
+    let obs: Vec<Obs> = geometry
         .into_iter()
         .map(|g| Obs {
             radiance: model.radiance(&params, &g),

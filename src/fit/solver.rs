@@ -16,7 +16,8 @@
 //! those of the fit with the floor free; the floor itself is −(wᵀr)/(wᵀw) (docs/pipeline.md, "The
 //! dark floor").
 
-use crate::model::{idx, Geometry, Model, Params, Prepared, N_PARAMS};
+use crate::model::lanes::{f64x4, Real};
+use crate::model::{idx, Geometry, Lanes4, Model, Params, Prepared, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
@@ -184,50 +185,74 @@ fn channel_exclusive(k: usize) -> Option<usize> {
 /// One chunk's normal equations per channel over that channel's own parameters (the lower
 /// triangle, row-major with stride [`MAX_ROW`]), scattered into the free parameters' matrix once
 /// per chunk: a channel's row has at most [`MAX_ROW`] non-zeros, so this is half the work of the
-/// dense product, on fixed-size arrays.
-struct ChunkSums {
-    a: [[f64; MAX_ROW * MAX_ROW]; 3],
-    b: [[f64; MAX_ROW]; 3],
-    rr: f64,
-    ww: [f64; 3],
-    wr: [f64; 3],
-    wg: [[f64; MAX_ROW]; 3],
+/// dense product, on fixed-size arrays. Generic over [`Real`]: on `f64` one observation at a
+/// time, on [`f64x4`] four (one a lane), their lanes summed when the chunk is scattered.
+#[derive(Clone, Copy)]
+struct ChunkSums<T> {
+    a: [[T; MAX_ROW * MAX_ROW]; 3],
+    b: [[T; MAX_ROW]; 3],
+    rr: T,
+    ww: [T; 3],
+    wr: [T; 3],
+    wg: [[T; MAX_ROW]; 3],
 }
 
-impl ChunkSums {
-    fn new() -> ChunkSums {
+impl<T: Real> ChunkSums<T> {
+    fn new() -> ChunkSums<T> {
+        let z = T::splat(0.0);
         ChunkSums {
-            a: [[0.0; MAX_ROW * MAX_ROW]; 3],
-            b: [[0.0; MAX_ROW]; 3],
-            rr: 0.0,
-            ww: [0.0; 3],
-            wr: [0.0; 3],
-            wg: [[0.0; MAX_ROW]; 3],
+            a: [[z; MAX_ROW * MAX_ROW]; 3],
+            b: [[z; MAX_ROW]; 3],
+            rr: z,
+            ww: [z; 3],
+            wr: [z; 3],
+            wg: [[z; MAX_ROW]; 3],
         }
     }
 
     /// One residual r of channel `ch` with its Jacobian row g (that channel's parameters) and
     /// weight w.
     #[inline(always)]
-    fn add(&mut self, ch: usize, g: &[f64], r: f64, w: f64, floor: bool) {
+    fn add(&mut self, ch: usize, g: &[T], r: T, w: T, floor: bool) {
         let (a, b) = (&mut self.a[ch], &mut self.b[ch]);
         for (i, &gi) in g.iter().enumerate() {
-            b[i] += gi * r;
+            b[i] = b[i] + gi * r;
             let row = &mut a[i * MAX_ROW..i * MAX_ROW + i + 1];
             for (s, &gj) in row.iter_mut().zip(&g[..=i]) {
-                *s += gi * gj;
+                *s = *s + gi * gj;
             }
         }
-        self.rr += r * r;
+        self.rr = self.rr + r * r;
         if floor {
-            self.ww[ch] += w * w;
-            self.wr[ch] += w * r;
+            self.ww[ch] = self.ww[ch] + w * w;
+            self.wr[ch] = self.wr[ch] + w * r;
             for (s, &gi) in self.wg[ch].iter_mut().zip(g) {
-                *s += w * gi;
+                *s = *s + w * gi;
             }
         }
     }
 
+    /// Every entry summed over its lanes into `into`.
+    fn fold_into(&self, into: &mut ChunkSums<f64>) {
+        let sum = |v: T| (0..T::LANES).map(|k| v.lane(k)).sum::<f64>();
+        for c in 0..3 {
+            for (s, &v) in into.a[c].iter_mut().zip(&self.a[c]) {
+                *s += sum(v);
+            }
+            for (s, &v) in into.b[c].iter_mut().zip(&self.b[c]) {
+                *s += sum(v);
+            }
+            for (s, &v) in into.wg[c].iter_mut().zip(&self.wg[c]) {
+                *s += sum(v);
+            }
+            into.ww[c] += sum(self.ww[c]);
+            into.wr[c] += sum(self.wr[c]);
+        }
+        into.rr += sum(self.rr);
+    }
+}
+
+impl ChunkSums<f64> {
     /// Into the free parameters' raw normal equations (JᵀJ's lower triangle).
     fn scatter(&self, layout: &[Vec<(usize, usize)>; 3], n: usize, floor: bool) -> RawNormal {
         let mut jtj = DMatrix::<f64>::zeros(n, n);
@@ -252,6 +277,50 @@ impl ChunkSums {
             rtr: self.rr,
             floor: fs,
         }
+    }
+}
+
+/// A group's sums within one chunk: observations taken one at a time, and four at a time where
+/// the model evaluates them in lanes ([`Prepared::radiance_with_gradient_x4`]).
+struct GroupSums {
+    one: ChunkSums<f64>,
+    four: Option<Box<ChunkSums<f64x4>>>,
+}
+
+impl GroupSums {
+    fn new() -> GroupSums {
+        GroupSums {
+            one: ChunkSums::new(),
+            four: None,
+        }
+    }
+
+    fn scatter(mut self, layout: &[Vec<(usize, usize)>; 3], n: usize, floor: bool) -> RawNormal {
+        if let Some(four) = &self.four {
+            four.fold_into(&mut self.one);
+        }
+        self.one.scatter(layout, n, floor)
+    }
+}
+
+/// What the kernel needs of the free parameters per channel: each row entry's model parameter
+/// (`cols`) and dp/du (`scale`), and the row's length.
+struct RowLayout {
+    cols: [[usize; MAX_ROW]; 3],
+    scale: [[f64; MAX_ROW]; 3],
+    len: [usize; 3],
+}
+
+impl RowLayout {
+    /// Channel `ch`'s weighted Jacobian row (the free parameters it depends on) from the model's
+    /// gradient, into `g`; its length.
+    #[inline(always)]
+    fn row<T: Real>(&self, ch: usize, w: T, grad: &[T; N_PARAMS], g: &mut [T; MAX_ROW]) -> usize {
+        let m = self.len[ch];
+        for i in 0..m {
+            g[i] = w * grad[self.cols[ch][i]] * self.scale[ch][i];
+        }
+        m
     }
 }
 
@@ -514,36 +583,45 @@ impl Problem<'_> {
                 .collect()
         });
         // Per channel and row entry: the model parameter and its dp/du.
-        let scale: [[f64; MAX_ROW]; 3] = std::array::from_fn(|c| {
-            std::array::from_fn(|i| layout[c].get(i).map_or(0.0, |&(_, k)| dpdu[k]))
-        });
-        let cols: [[usize; MAX_ROW]; 3] = std::array::from_fn(|c| {
-            std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
-        });
+        let rows = RowLayout {
+            scale: std::array::from_fn(|c| {
+                std::array::from_fn(|i| layout[c].get(i).map_or(0.0, |&(_, k)| dpdu[k]))
+            }),
+            cols: std::array::from_fn(|c| {
+                std::array::from_fn(|i| layout[c].get(i).map_or(0, |&(_, k)| k))
+            }),
+            len: std::array::from_fn(|c| layout[c].len()),
+        };
+        let group_of = |i: usize| groups.map_or(0, |g| g.0[i]);
         let mut sums = self
             .obs
             .par_chunks(CHUNK)
             .enumerate()
             .map(|(ci, chunk)| {
-                let mut acc: Vec<ChunkSums> = (0..count).map(|_| ChunkSums::new()).collect();
-                let mut g = [0.0; MAX_ROW];
-                for (i, o) in chunk.iter().enumerate() {
-                    let a = &mut acc[groups.map_or(0, |g| g.0[ci * CHUNK + i])];
-                    let (l, grad) = prepared.radiance_with_gradient(&o.geometry);
-                    for ch in 0..3 {
-                        let w = o.weight[ch];
-                        if w == 0.0 {
-                            continue;
-                        }
-                        let m = layout[ch].len();
-                        let r = w * (l[ch] - o.radiance[ch]);
-                        for i in 0..m {
-                            g[i] = w * grad[ch][cols[ch][i]] * scale[ch][i];
-                        }
-                        a.add(ch, &g[..m], r, w, floor);
+                let mut acc: Vec<GroupSums> = (0..count).map(|_| GroupSums::new()).collect();
+                let mut i = 0;
+                while i < chunk.len() {
+                    let group = group_of(ci * CHUNK + i);
+                    let four = chunk
+                        .get(i..i + 4)
+                        .filter(|_| (1..4).all(|k| group_of(ci * CHUNK + i + k) == group));
+                    let lanes = four.and_then(|f| {
+                        let eval = prepared
+                            .radiance_with_gradient_x4([0, 1, 2, 3].map(|k| &f[k].geometry))?;
+                        Some((f, eval))
+                    });
+                    if let Some((four, eval)) = lanes {
+                        let sums = acc[group]
+                            .four
+                            .get_or_insert_with(|| Box::new(ChunkSums::new()));
+                        add_four(sums, four, &eval, &rows, floor);
+                        i += 4;
+                        continue;
                     }
+                    add_one(&mut acc[group].one, &chunk[i], &prepared, &rows, floor);
+                    i += 1;
                 }
-                acc.iter()
+                acc.into_iter()
                     .map(|a| a.scatter(&layout, n, floor))
                     .collect::<Vec<_>>()
             })
@@ -638,6 +716,52 @@ impl Problem<'_> {
             [0.0; 3]
         };
         u.iter().all(|v| v.is_finite()).then_some((u, floor))
+    }
+}
+
+/// One observation's weighted residuals and Jacobian rows into `sums`.
+#[inline(always)]
+fn add_one(sums: &mut ChunkSums<f64>, o: &Obs, prepared: &Prepared, rows: &RowLayout, floor: bool) {
+    let (l, grad) = prepared.radiance_with_gradient(&o.geometry);
+    let mut g = [0.0; MAX_ROW];
+    for ch in 0..3 {
+        let w = o.weight[ch];
+        if w == 0.0 {
+            continue;
+        }
+        let r = w * (l[ch] - o.radiance[ch]);
+        let m = rows.row(ch, w, &grad[ch], &mut g);
+        sums.add(ch, &g[..m], r, w, floor);
+    }
+}
+
+/// [`add_one`] for four observations at once, from the model in lanes (`eval`); a channel left
+/// out of an observation (weight 0) adds nothing in its lane.
+#[inline(always)]
+fn add_four(
+    sums: &mut ChunkSums<f64x4>,
+    obs: &[Obs],
+    (l, grad): &Lanes4,
+    rows: &RowLayout,
+    floor: bool,
+) {
+    let zero = f64x4::splat(0.0);
+    let mut g = [zero; MAX_ROW];
+    for ch in 0..3 {
+        let w = f64x4::from_lanes(|k| obs[k].weight[ch]);
+        let off = w.eq(0.0);
+        if <f64x4 as Real>::all(off) {
+            continue;
+        }
+        let y = f64x4::from_lanes(|k| obs[k].radiance[ch]);
+        let r = f64x4::select(off, zero, w * (l[ch] - y));
+        let m = rows.row(ch, w, &grad[ch], &mut g);
+        if <f64x4 as Real>::any(off) {
+            for gi in &mut g[..m] {
+                *gi = f64x4::select(off, zero, *gi);
+            }
+        }
+        sums.add(ch, &g[..m], r, w, floor);
     }
 }
 

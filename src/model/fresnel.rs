@@ -7,53 +7,59 @@
 //!
 //! By reciprocity the same T applies to light leaving the medium at the outside angle θi.
 
-/// F with its derivatives with respect to cos θi and η.
+use crate::model::lanes::Real;
+
+/// F with its derivatives with respect to cos θi and η (on one pixel or four, [`Real`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FresnelEval {
-    pub reflectance: f64,
-    pub d_cos: f64,
-    pub d_eta: f64,
+pub struct FresnelEval<T = f64> {
+    pub reflectance: T,
+    pub d_cos: T,
+    pub d_eta: T,
 }
 
-impl FresnelEval {
+impl<T: Real> FresnelEval<T> {
     /// Transmission T = 1 − F.
-    pub fn transmission(&self) -> f64 {
-        1.0 - self.reflectance
+    pub fn transmission(&self) -> T {
+        -self.reflectance + 1.0
     }
 }
 
 /// Fresnel reflectance for cos θi in [0, 1] (clamped) and η ≥ 1.
-pub fn eval(cos_i: f64, eta: f64) -> FresnelEval {
-    let ci = cos_i.clamp(0.0, 1.0);
-    let si2 = 1.0 - ci * ci;
-    let ct2 = 1.0 - si2 / (eta * eta);
-    if ct2 <= 0.0 || (ci == 0.0 && eta <= 1.0) {
-        // Grazing incidence onto an index-matched medium: the limit is total reflection.
-        return FresnelEval {
-            reflectance: 1.0,
-            d_cos: 0.0,
-            d_eta: 0.0,
-        };
+#[inline(always)]
+pub fn eval<T: Real>(cos_i: T, eta: f64) -> FresnelEval<T> {
+    let ci = cos_i.max(0.0).min(1.0);
+    let si2 = -(ci * ci) + 1.0;
+    let ct2 = -(si2 / (eta * eta)) + 1.0;
+    // Grazing incidence onto an index-matched medium: the limit is total reflection.
+    let total = ct2.le(0.0) | (ci.eq(0.0) & T::mask(eta <= 1.0));
+    let reflected = FresnelEval {
+        reflectance: T::splat(1.0),
+        d_cos: T::splat(0.0),
+        d_eta: T::splat(0.0),
+    };
+    if T::all(total) {
+        return reflected;
     }
     let ct = ct2.sqrt();
-    let e2ct = 1.0 / (eta * eta * ct);
+    let e2ct = T::splat(1.0) / (ct * (eta * eta));
     let dct_dci = ci * e2ct;
     let dct_deta = si2 * e2ct / eta;
     // r = (a − b)/(a + b): dr = 2 (b da − a db) / (a + b)², one division per ratio.
     // rs: a = ci, b = η ct; rp: a = η ci, b = ct.
-    let (a_s, b_s) = (ci, eta * ct);
-    let (a_p, b_p) = (eta * ci, ct);
-    let (inv_s, inv_p) = (1.0 / (a_s + b_s), 1.0 / (a_p + b_p));
+    let (a_s, b_s) = (ci, ct * eta);
+    let (a_p, b_p) = (ci * eta, ct);
+    let (inv_s, inv_p) = (T::splat(1.0) / (a_s + b_s), T::splat(1.0) / (a_p + b_p));
     let (rs, rp) = ((a_s - b_s) * inv_s, (a_p - b_p) * inv_p);
-    let (ks, kp) = (2.0 * inv_s * inv_s, 2.0 * inv_p * inv_p);
+    let (ks, kp) = (inv_s * 2.0 * inv_s, inv_p * 2.0 * inv_p);
     let drs_dci = ks * (b_s - a_s * eta * dct_dci);
-    let drs_deta = -ks * a_s * (ct + eta * dct_deta);
+    let drs_deta = -ks * a_s * (ct + dct_deta * eta);
     let drp_dci = kp * (b_p * eta - a_p * dct_dci);
     let drp_deta = kp * (b_p * ci - a_p * dct_deta);
+    let pick = |v: T, r: T| T::select(total, r, v);
     FresnelEval {
-        reflectance: 0.5 * (rs * rs + rp * rp),
-        d_cos: rs * drs_dci + rp * drp_dci,
-        d_eta: rs * drs_deta + rp * drp_deta,
+        reflectance: pick((rs * rs + rp * rp) * 0.5, reflected.reflectance),
+        d_cos: pick(rs * drs_dci + rp * drp_dci, reflected.d_cos),
+        d_eta: pick(rs * drs_deta + rp * drp_deta, reflected.d_eta),
     }
 }
 

@@ -3,6 +3,7 @@
 
 use crate::model::cdrf::Convolution;
 use crate::model::cdrf::{self, eval_series, CdrfEval, Series, SeriesEval};
+use crate::model::lanes::Real;
 use crate::model::table::{Slice, Table};
 
 /// The CDRF with a kernel of two Gaussians, (1 − w)·f(θ; σ) + w·f(θ; s·σ): a weight w ∈ [0, 1)
@@ -10,15 +11,15 @@ use crate::model::table::{Slice, Table};
 /// diffusion profiles (a sharp core, a long tail); the blur is linear in its kernel, so the closed
 /// form and every derivative carry over term by term. w = 0 is the plain CDRF (one evaluation).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MixtureEval {
+pub struct MixtureEval<T = f64> {
     /// Value and ∂/∂θ, ∂²/∂θ², ∂/∂σ (σ the core's width; the tail's is s·σ).
-    pub f: CdrfEval,
+    pub f: CdrfEval<T>,
     /// ∂f/∂w.
-    pub d_weight: f64,
+    pub d_weight: T,
     /// ∂f/∂s.
-    pub d_ratio: f64,
+    pub d_ratio: T,
     /// ∂f/∂p of a [`Series`] source (0 for the clamped cosine).
-    pub d_param: f64,
+    pub d_param: T,
 }
 
 /// How each Gaussian's CDRF is evaluated: the closed form of a convolution, or the wrapped form
@@ -56,25 +57,39 @@ pub(crate) fn eval(
         (Some(series), Blur::Table(_)) => eval_series(theta, sig, series, Convolution::Wrapped),
     };
     let core = one(sigma, 0);
-    if w == 0.0 {
+    let tail = (w != 0.0).then(|| one(s * sigma, 1));
+    let part = |e: SeriesEval| (e.f, e.d_param);
+    mix(part(core), tail.map(part), sigma, (w, s))
+}
+
+/// The two Gaussians' CDRFs (each with ∂f/∂p of its source) mixed at weight `w`, width ratio `s`
+/// and core width σ: [`MixtureEval`]; no tail, the core alone (w = 0). On one pixel or four
+/// ([`Real`]).
+#[inline(always)]
+pub(crate) fn mix<T: Real>(
+    (core, core_param): (CdrfEval<T>, T),
+    tail: Option<(CdrfEval<T>, T)>,
+    sigma: f64,
+    (w, s): (f64, f64),
+) -> MixtureEval<T> {
+    let Some((tail, tail_param)) = tail else {
         return MixtureEval {
-            f: core.f,
-            d_weight: 0.0,
-            d_ratio: 0.0,
-            d_param: core.d_param,
+            f: core,
+            d_weight: T::splat(0.0),
+            d_ratio: T::splat(0.0),
+            d_param: core_param,
         };
-    }
-    let tail = one(s * sigma, 1);
-    let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
+    };
+    let mix = |a: T, b: T| a * (1.0 - w) + b * w;
     MixtureEval {
         f: CdrfEval {
-            value: mix(core.f.value, tail.f.value),
-            d_theta: mix(core.f.d_theta, tail.f.d_theta),
-            d2_theta: mix(core.f.d2_theta, tail.f.d2_theta),
-            d_sigma: mix(core.f.d_sigma, s * tail.f.d_sigma),
+            value: mix(core.value, tail.value),
+            d_theta: mix(core.d_theta, tail.d_theta),
+            d2_theta: mix(core.d2_theta, tail.d2_theta),
+            d_sigma: mix(core.d_sigma, tail.d_sigma * s),
         },
-        d_weight: tail.f.value - core.f.value,
-        d_ratio: w * sigma * tail.f.d_sigma,
-        d_param: mix(core.d_param, tail.d_param),
+        d_weight: tail.value - core.value,
+        d_ratio: tail.d_sigma * (w * sigma),
+        d_param: mix(core_param, tail_param),
     }
 }

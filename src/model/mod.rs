@@ -6,6 +6,7 @@
 pub mod cdrf;
 pub mod entry;
 pub mod fresnel;
+pub mod lanes;
 pub mod mixture;
 mod radiance;
 pub mod specular;

@@ -22,6 +22,7 @@
 use crate::model::cdrf::Convolution;
 use crate::model::entry;
 use crate::model::fresnel;
+use crate::model::lanes::{f64x4, Real};
 use crate::model::mixture::{self, Blur};
 use crate::model::specular;
 use crate::model::table::{Slice, Table};
@@ -403,76 +404,119 @@ impl Model {
         want_grad: bool,
         slices: Option<&RadiusSlices>,
     ) -> (Rgb, Gradient) {
-        let mut out = [0.0; 3];
-        let mut grad = [[0.0; N_PARAMS]; 3];
         let nv = g.normal.dot(&g.view);
         if nv <= 0.0 {
-            return (out, grad);
+            return ([0.0; 3], [[0.0; N_PARAMS]; 3]);
         }
         let m = &p.material;
-        let l = light.l;
-        let nl = g.normal.dot(&l).clamp(-1.0, 1.0);
-        let lv = l.dot(&g.view).clamp(-1.0, 1.0);
+        let (n, v, l) = (&g.normal, &g.view, &light.l);
+        let cosines = Cosines {
+            nv,
+            nl: n.dot(l).clamp(-1.0, 1.0),
+            lv: l.dot(v).clamp(-1.0, 1.0),
+            n_da: n.dot(&light.dl_da),
+            n_de: n.dot(&light.dl_de),
+            v_da: v.dot(&light.dl_da),
+            v_de: v.dot(&light.dl_de),
+        };
+        let ln_rr = match slices {
+            Some(s) => s.ln_rr,
+            None if want_grad => (self.reference_radius_mm / g.radius_mm).ln(),
+            None => 0.0,
+        };
+        self.shade(
+            m,
+            &cosines,
+            g.radius_mm,
+            ln_rr,
+            want_grad,
+            |c, theta, sigma| {
+                let slices =
+                    slices.map_or([None, None], |s| [s.core[c].as_ref(), s.tail[c].as_ref()]);
+                self.profile_with(m, theta, sigma, slices)
+            },
+        )
+    }
+
+    /// The module formula and, with `want_grad`, its gradient, on one pixel or four ([`Real`])
+    /// of one radius whose n·v > 0, with the blur profile of channel c at (θ, σ_c) from
+    /// `profile`; `ln_rr` = ln(r_ref / r), needed only for the gradient.
+    #[inline(always)]
+    fn shade<T: Real>(
+        &self,
+        m: &Material,
+        g: &Cosines<T>,
+        radius_mm: f64,
+        ln_rr: f64,
+        want_grad: bool,
+        profile: impl Fn(usize, T, f64) -> mixture::MixtureEval<T>,
+    ) -> ([T; 3], [[T; N_PARAMS]; 3]) {
+        let zero = T::splat(0.0);
+        let mut out = [zero; 3];
+        let mut grad = [[zero; N_PARAMS]; 3];
+        let (nl, nv) = (g.nl, g.nv);
         let theta = nl.acos();
         // sin θ for ∂f/∂(cos θ), once for the three channels.
-        let sin_theta = ((1.0 - nl) * (1.0 + nl)).sqrt();
+        let sin_theta = ((-nl + 1.0) * (nl + 1.0)).sqrt();
         let fr = if self.exit_fresnel {
             fresnel::eval(nv, m.eta)
         } else {
             fresnel::FresnelEval {
-                reflectance: 0.0,
-                d_cos: 0.0,
-                d_eta: 0.0,
+                reflectance: zero,
+                d_cos: zero,
+                d_eta: zero,
             }
         };
         let t_exit = fr.transmission();
-        let rr = self.reference_radius_mm / g.radius_mm;
+        let rr = self.reference_radius_mm / radius_mm;
         // Off extensions scale by exactly 1, without the transcendental calls.
-        let sigma_scale = self.sigma_scale(m, g.radius_mm);
+        let sigma_scale = self.sigma_scale(m, radius_mm);
         let albedo_scale = if m.albedo_curvature == 0.0 {
             1.0
         } else {
             (m.albedo_curvature * (rr - 1.0)).exp()
         };
-        let spec = specular::lobe(nl, nv, lv, m.specular.ks, m.specular.alpha, m.eta);
-        let (dl_da, dl_de) = (light.dl_da, light.dl_de);
-        let ln_rr = match slices {
-            Some(s) => s.ln_rr,
-            None if want_grad => rr.ln(),
-            None => 0.0,
-        };
+        let spec = specular::lobe(nl, nv, g.lv, m.specular.ks, m.specular.alpha, m.eta);
         for c in 0..3 {
-            let sigma = m.sigma0_mm[c] / g.radius_mm * sigma_scale;
-            let mix = self.profile_with(
-                m,
-                theta,
-                sigma,
-                slices.map_or([None, None], |s| [s.core[c].as_ref(), s.tail[c].as_ref()]),
-            );
+            let sigma = m.sigma0_mm[c] / radius_mm * sigma_scale;
+            let mix = profile(c, theta, sigma);
             let f = mix.f;
             let a = m.albedo[c] * albedo_scale;
-            out[c] = a * t_exit * f.value + spec.value;
+            let at = t_exit * a;
+            out[c] = at * f.value + spec.value;
             if !want_grad {
                 continue;
             }
             let row = &mut grad[c];
-            row[idx::SIGMA0 + c] = a * t_exit * f.d_sigma * sigma / m.sigma0_mm[c];
-            row[idx::ALBEDO + c] = albedo_scale * t_exit * f.value;
-            row[idx::ETA] = a * (t_exit * mix.d_param - f.value * fr.d_eta) + spec.d_eta;
+            row[idx::SIGMA0 + c] = at * f.d_sigma * sigma / m.sigma0_mm[c];
+            row[idx::ALBEDO + c] = t_exit * albedo_scale * f.value;
+            row[idx::ETA] = (t_exit * mix.d_param - f.value * fr.d_eta) * a + spec.d_eta;
             row[idx::KS] = spec.d_ks;
             row[idx::ALPHA] = spec.d_alpha;
-            row[idx::SIGMA_EXPONENT] = a * t_exit * f.d_sigma * sigma * ln_rr;
-            row[idx::ALBEDO_CURVATURE] = a * t_exit * f.value * (rr - 1.0);
-            row[idx::KERNEL_WEIGHT] = a * t_exit * mix.d_weight;
-            row[idx::KERNEL_RATIO] = a * t_exit * mix.d_ratio;
-            // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v
-            let d_nl = a * t_exit * f.d_cos_at(sin_theta, nl) + spec.d_nl;
-            let dl = g.normal * d_nl + g.view * spec.d_lv;
-            row[idx::AZIMUTH] = dl.dot(&dl_da);
-            row[idx::ELEVATION] = dl.dot(&dl_de);
+            row[idx::SIGMA_EXPONENT] = at * f.d_sigma * sigma * ln_rr;
+            row[idx::ALBEDO_CURVATURE] = at * f.value * (rr - 1.0);
+            row[idx::KERNEL_WEIGHT] = at * mix.d_weight;
+            row[idx::KERNEL_RATIO] = at * mix.d_ratio;
+            // ∂L/∂l = (∂L/∂(n·l)) n + (∂L/∂(l·v)) v, projected on ∂l/∂azimuth and ∂l/∂elevation.
+            let d_nl = at * f.d_cos_at(sin_theta, nl) + spec.d_nl;
+            row[idx::AZIMUTH] = d_nl * g.n_da + spec.d_lv * g.v_da;
+            row[idx::ELEVATION] = d_nl * g.n_de + spec.d_lv * g.v_de;
         }
         (out, grad)
     }
+}
+
+/// What the model needs of a pixel's geometry, on one pixel or four ([`Real`]): n·v, n·l and
+/// l·v (the last two clamped to [−1, 1]), and the normal's and the view's projections on the
+/// light's derivatives ∂l/∂azimuth and ∂l/∂elevation.
+struct Cosines<T> {
+    nv: T,
+    nl: T,
+    lv: T,
+    n_da: T,
+    n_de: T,
+    v_da: T,
+    v_de: T,
 }
 
 /// The most distinct radii a [`Prepared`] model holds slices for (16 KB per channel and width).
@@ -504,4 +548,65 @@ impl Prepared {
         let slices = self.slices.iter().find(|s| s.radius_mm == g.radius_mm);
         self.model.eval(&self.params, &self.frame, g, true, slices)
     }
+
+    /// [`Prepared::radiance_with_gradient`] at four pixels at once, in lanes ([`Real`]): their
+    /// radiance and gradient, lane k being pixel k's to a few units in the last place. `None`
+    /// unless the four share a radius whose table slices this model holds and every one faces
+    /// the camera (n·v > 0): those are for the one-pixel path.
+    pub fn radiance_with_gradient_x4(&self, g: [&Geometry; 4]) -> Option<Lanes4> {
+        let radius_mm = g[0].radius_mm;
+        if g.iter().any(|p| p.radius_mm != radius_mm) {
+            return None;
+        }
+        let m = &self.params.material;
+        let slices = self.slices.iter().find(|s| s.radius_mm == radius_mm)?;
+        let sigma_scale = self.model.sigma_scale(m, radius_mm);
+        let two = m.kernel_weight != 0.0;
+        let mut pairs = [(None, None); 3];
+        for (c, pair) in pairs.iter_mut().enumerate() {
+            let sigma = m.sigma0_mm[c] / radius_mm * sigma_scale;
+            let core = slices.core[c].as_ref().filter(|s| s.sigma == sigma)?;
+            let tail = match &slices.tail[c] {
+                Some(t) if two && t.sigma == m.kernel_ratio * sigma => Some(t),
+                _ if two => return None,
+                _ => None,
+            };
+            *pair = (Some(core), tail);
+        }
+        let n: [f64x4; 3] = std::array::from_fn(|i| f64x4::new(g.map(|p| p.normal[i])));
+        let v: [f64x4; 3] = std::array::from_fn(|i| f64x4::new(g.map(|p| p.view[i])));
+        let dot = |a: &[f64x4; 3], b: &Vector3<f64>| a[0] * b.x + a[1] * b.y + a[2] * b.z;
+        let nv = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+        if <f64x4 as Real>::any(nv.le(0.0)) {
+            return None;
+        }
+        let frame = &self.frame;
+        let cosines = Cosines {
+            nv,
+            nl: Real::min(Real::max(dot(&n, &frame.l), -1.0), 1.0),
+            lv: Real::min(Real::max(dot(&v, &frame.l), -1.0), 1.0),
+            n_da: dot(&n, &frame.dl_da),
+            n_de: dot(&n, &frame.dl_de),
+            v_da: dot(&v, &frame.dl_da),
+            v_de: dot(&v, &frame.dl_de),
+        };
+        let zero = f64x4::splat(0.0);
+        let (w, s) = (m.kernel_weight, m.kernel_ratio);
+        Some(self.model.shade(
+            m,
+            &cosines,
+            radius_mm,
+            slices.ln_rr,
+            true,
+            |c, theta, sigma| {
+                let (core, tail) = pairs[c];
+                let core = core.expect("checked above").eval_in(theta);
+                let tail = tail.map(|t| (t.eval_in(theta), zero));
+                mixture::mix((core, zero), tail, sigma, (w, s))
+            },
+        ))
+    }
 }
+
+/// Radiance and gradient on four pixels ([`Prepared::radiance_with_gradient_x4`]).
+pub type Lanes4 = ([f64x4; 3], [[f64x4; N_PARAMS]; 3]);

@@ -10,74 +10,91 @@
 //! n·h = (n·l + n·v)/sqrt(2 + 2 l·v) and l·h = sqrt((1 + l·v)/2)).
 
 use crate::model::fresnel;
+use crate::model::lanes::Real;
 use std::f64::consts::PI;
 
-/// GGX normal distribution D(n·h) with ∂D/∂(n·h) and ∂D/∂α.
-pub fn ggx_d(nh: f64, alpha: f64) -> (f64, f64, f64) {
+/// GGX normal distribution D(n·h) with ∂D/∂(n·h) and ∂D/∂α (on one pixel or four, [`Real`]).
+#[inline(always)]
+pub fn ggx_d<T: Real>(nh: T, alpha: f64) -> (T, T, T) {
     let a2 = alpha * alpha;
     let q = nh * nh * (a2 - 1.0) + 1.0;
-    let d = a2 / (PI * q * q);
-    let d_nh = -4.0 * a2 * nh * (a2 - 1.0) / (PI * q * q * q);
-    let d_a2 = 1.0 / (PI * q * q) - 2.0 * a2 * nh * nh / (PI * q * q * q);
-    (d, d_nh, 2.0 * alpha * d_a2)
+    let pq2 = q * PI * q;
+    let pq3 = pq2 * q;
+    let d = T::splat(a2) / pq2;
+    let d_nh = nh * (-4.0 * a2) * (a2 - 1.0) / pq3;
+    let d_a2 = T::splat(1.0) / pq2 - nh * (2.0 * a2) * nh / pq3;
+    (d, d_nh, d_a2 * (2.0 * alpha))
 }
 
 /// Smith masking G1(c) for GGX with ∂G1/∂c and ∂G1/∂α.
-pub fn smith_g1(c: f64, alpha: f64) -> (f64, f64, f64) {
+#[inline(always)]
+pub fn smith_g1<T: Real>(c: T, alpha: f64) -> (T, T, T) {
     let a2 = alpha * alpha;
-    let r = (a2 + (1.0 - a2) * c * c).sqrt();
+    let r = (c * (1.0 - a2) * c + a2).sqrt();
     let s = c + r;
-    let g = 2.0 * c / s;
-    let dr_dc = (1.0 - a2) * c / r;
-    let d_c = 2.0 / s - 2.0 * c * (1.0 + dr_dc) / (s * s);
-    let dr_da2 = (1.0 - c * c) / (2.0 * r);
-    let d_a2 = -2.0 * c * dr_da2 / (s * s);
-    (g, d_c, 2.0 * alpha * d_a2)
+    let g = c * 2.0 / s;
+    let dr_dc = c * (1.0 - a2) / r;
+    let d_c = T::splat(2.0) / s - c * 2.0 * (dr_dc + 1.0) / (s * s);
+    let dr_da2 = (-(c * c) + 1.0) / (r * 2.0);
+    let d_a2 = c * (-2.0) * dr_da2 / (s * s);
+    (g, d_c, d_a2 * (2.0 * alpha))
 }
 
 /// fs·(n·l) and its derivatives.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct LobeEval {
-    pub value: f64,
-    pub d_nl: f64,
-    pub d_lv: f64,
-    pub d_ks: f64,
-    pub d_alpha: f64,
-    pub d_eta: f64,
+pub struct LobeEval<T = f64> {
+    pub value: T,
+    pub d_nl: T,
+    pub d_lv: T,
+    pub d_ks: T,
+    pub d_alpha: T,
+    pub d_eta: T,
 }
 
 /// The specular term fs·(n·l) = ks D G F / (4 n·v); zero unless n·l > 0 and n·v > 0.
-pub fn lobe(nl: f64, nv: f64, lv: f64, ks: f64, alpha: f64, eta: f64) -> LobeEval {
-    if nl <= 0.0 || nv <= 0.0 || lv <= -1.0 + 1e-12 {
-        return LobeEval::default();
+#[inline(always)]
+pub fn lobe<T: Real>(nl: T, nv: T, lv: T, ks: f64, alpha: f64, eta: f64) -> LobeEval<T> {
+    let dark = nl.le(0.0) | nv.le(0.0) | lv.le(-1.0 + 1e-12);
+    let zero = T::splat(0.0);
+    if T::all(dark) {
+        return LobeEval {
+            value: zero,
+            d_nl: zero,
+            d_lv: zero,
+            d_ks: zero,
+            d_alpha: zero,
+            d_eta: zero,
+        };
     }
-    let m2 = 2.0 + 2.0 * lv;
+    let m2 = lv * 2.0 + 2.0;
     let m = m2.sqrt();
     let nh = ((nl + nv) / m).min(1.0);
-    let lh = (0.5 * (1.0 + lv)).sqrt();
-    let dnh_dnl = 1.0 / m;
+    let lh = ((lv + 1.0) * 0.5).sqrt();
+    let dnh_dnl = T::splat(1.0) / m;
     let dnh_dlv = -nh / m2;
-    let dlh_dlv = 0.25 / lh;
+    let dlh_dlv = T::splat(0.25) / lh;
 
     let (d, dd_nh, dd_a) = ggx_d(nh, alpha);
     let (gl, dgl_c, dgl_a) = smith_g1(nl, alpha);
     let (gv, _, dgv_a) = smith_g1(nv, alpha);
     let f = fresnel::eval(lh, eta);
 
-    let k = 1.0 / (4.0 * nv);
+    let k = T::splat(1.0) / (nv * 4.0);
+    let kk = k * ks;
     let base = d * gl * gv * f.reflectance * k; // the lobe with ks = 1
-    let value = ks * base;
-    let d_nl = ks * k * gv * f.reflectance * (dd_nh * dnh_dnl * gl + d * dgl_c);
-    let d_lv = ks * k * gl * gv * (dd_nh * dnh_dlv * f.reflectance + d * f.d_cos * dlh_dlv);
-    let d_alpha = ks * k * f.reflectance * (dd_a * gl * gv + d * dgl_a * gv + d * gl * dgv_a);
-    let d_eta = ks * k * d * gl * gv * f.d_eta;
+    let value = base * ks;
+    let d_nl = kk * gv * f.reflectance * (dd_nh * dnh_dnl * gl + d * dgl_c);
+    let d_lv = kk * gl * gv * (dd_nh * dnh_dlv * f.reflectance + d * f.d_cos * dlh_dlv);
+    let d_alpha = kk * f.reflectance * (dd_a * gl * gv + d * dgl_a * gv + d * gl * dgv_a);
+    let d_eta = kk * d * gl * gv * f.d_eta;
+    let lit = |v: T| T::select(dark, zero, v);
     LobeEval {
-        value,
-        d_nl,
-        d_lv,
-        d_ks: base,
-        d_alpha,
-        d_eta,
+        value: lit(value),
+        d_nl: lit(d_nl),
+        d_lv: lit(d_lv),
+        d_ks: lit(base),
+        d_alpha: lit(d_alpha),
+        d_eta: lit(d_eta),
     }
 }
 

@@ -15,6 +15,7 @@
 //! 513 nodes fit in the first-level cache — the same interpolant, summed in another order.
 
 use crate::model::cdrf::{self, CdrfEval, Convolution};
+use crate::model::lanes::Real;
 use std::f64::consts::FRAC_PI_2;
 use std::sync::OnceLock;
 
@@ -38,14 +39,14 @@ pub struct Table {
 /// The cubic Hermite basis on a cell at s ∈ [0, 1]: the weights of the two nodes' values and of
 /// their slopes (in units of the cell), and the derivatives of both in s.
 #[inline(always)]
-fn hermite(s: f64) -> ([f64; 2], [f64; 2], [f64; 2], [f64; 2]) {
+fn hermite<T: Real>(s: T) -> ([T; 2], [T; 2], [T; 2], [T; 2]) {
     let s2 = s * s;
     let s3 = s2 * s;
     (
-        [2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2],
-        [s3 - 2.0 * s2 + s, s3 - s2],
-        [6.0 * s2 - 6.0 * s, -6.0 * s2 + 6.0 * s],
-        [3.0 * s2 - 4.0 * s + 1.0, 3.0 * s2 - 2.0 * s],
+        [s3 * 2.0 - s2 * 3.0 + 1.0, -(s3 * 2.0) + s2 * 3.0],
+        [s3 - s2 * 2.0 + s, s3 - s2],
+        [s2 * 6.0 - s * 6.0, -(s2 * 6.0) + s * 6.0],
+        [s2 * 3.0 - s * 4.0 + 1.0, s2 * 3.0 - s * 2.0],
     )
 }
 
@@ -226,23 +227,36 @@ impl Slice {
     /// closed form outside θ ∈ [0, π].
     #[inline]
     pub fn eval(&self, theta: f64) -> CdrfEval {
-        let sigma = self.sigma;
         if !(0.0..=std::f64::consts::PI).contains(&theta) {
-            return cdrf::eval(theta, sigma, Convolution::Wrapped);
+            return cdrf::eval(theta, self.sigma, Convolution::Wrapped);
         }
+        self.eval_in(theta)
+    }
+
+    /// [`Slice::eval`] on one pixel or four ([`Real`]) whose θ all lie in [0, π].
+    #[inline(always)]
+    pub fn eval_in<T: Real>(&self, theta: T) -> CdrfEval<T> {
         // As Table::eval, with the divisions by σ and the node spacings as multiplications.
         let z = (theta - FRAC_PI_2) * self.inv_sigma;
         let r = (z * z + 1.0).sqrt();
         let tau = (z.abs() + r).ln().copysign(z);
-        let tau_theta = self.inv_sigma / r;
+        let tau_theta = T::splat(self.inv_sigma) / r;
         let tau_sigma = -z * tau_theta;
         let x = (tau + self.tau_max) * self.inv_h_tau;
-        let i = (x as usize).min(N_TAU - 2);
-        let (hs, gs, dhs, dgs) = hermite(x - i as f64);
-        let (n0, n1) = (&self.nodes[i], &self.nodes[i + 1]);
-        let v = n0[0] * hs[0] + n0[1] * gs[0] + n1[0] * hs[1] + n1[1] * gs[1];
-        let v_s = n0[0] * dhs[0] + n0[1] * dgs[0] + n1[0] * dhs[1] + n1[1] * dgs[1];
-        let v_t = n0[2] * hs[0] + n0[3] * gs[0] + n1[2] * hs[1] + n1[3] * gs[1];
+        let cell: [usize; 4] = std::array::from_fn(|k| {
+            if k < T::LANES {
+                (x.lane(k) as usize).min(N_TAU - 2)
+            } else {
+                0
+            }
+        });
+        let (hs, gs, dhs, dgs) = hermite(x - T::from_lanes(|k| cell[k] as f64));
+        let node = |o: usize, e: usize| T::from_lanes(|k| self.nodes[cell[k] + o][e]);
+        let (n00, n01, n02, n03) = (node(0, 0), node(0, 1), node(0, 2), node(0, 3));
+        let (n10, n11, n12, n13) = (node(1, 0), node(1, 1), node(1, 2), node(1, 3));
+        let v = n00 * hs[0] + n01 * gs[0] + n10 * hs[1] + n11 * gs[1];
+        let v_s = n00 * dhs[0] + n01 * dgs[0] + n10 * dhs[1] + n11 * dgs[1];
+        let v_t = n02 * hs[0] + n03 * gs[0] + n12 * hs[1] + n13 * gs[1];
         let (f_tau, f_u) = (v_s * self.inv_h_tau, v_t * self.inv_h_u);
         let d_theta = f_tau * tau_theta;
         let d_sigma = f_tau * tau_sigma + f_u * self.inv_sigma;

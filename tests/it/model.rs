@@ -440,3 +440,79 @@ fn prepared_model_equals_the_model() {
     // cancellation at the terminator amplifies (measured 5.2e-12).
     assert!(worst < 1.6e-11, "{worst:e}");
 }
+
+/// The prepared model on four pixels at once (lanes: the fit's kernel) is the one-pixel model at
+/// each, to rounding: radiance and every gradient entry, with the extensions and two Gaussians on
+/// and off. Groups the lanes cannot take (mixed radii, a radius without slices, a pixel facing
+/// away) are refused, for the one-pixel path.
+#[test]
+fn four_lanes_equal_one_pixel_each() {
+    let model = Model::default();
+    let mut worst = 0.0f64;
+    let mut taken = 0;
+    for plain in [false, true] {
+        let mut p = params(1.2, 0.35);
+        if plain {
+            p.material.sigma_exponent = 0.0;
+            p.material.albedo_curvature = 0.0;
+            p.material.kernel_weight = 0.0;
+        }
+        let prepared = model.prepare(&p, [15.0, 25.0, 35.0]);
+        let view = Vector3::new(0.02, -0.01, -1.0).normalize();
+        let pixel = |i: usize, radius_mm: f64| {
+            let u = (i as f64 + 0.5) / 2000.0;
+            let (ph, ct) = (u * 371.0, 0.02 + 0.97 * (i as f64 * 0.618_034).fract());
+            let st = (1.0 - ct * ct).sqrt();
+            Geometry {
+                normal: Vector3::new(st * ph.cos(), st * ph.sin(), -ct),
+                view,
+                radius_mm,
+            }
+        };
+        for q in 0..500 {
+            let radius = [15.0, 25.0, 35.0, 50.0][q % 4];
+            let g: [Geometry; 4] = std::array::from_fn(|k| pixel(4 * q + k, radius));
+            let Some((l, grad)) = prepared.radiance_with_gradient_x4([&g[0], &g[1], &g[2], &g[3]])
+            else {
+                assert_eq!(radius, 50.0, "refused a group of sliced radius {radius}");
+                continue;
+            };
+            assert_ne!(radius, 50.0, "took a radius without slices");
+            taken += 1;
+            for (k, gk) in g.iter().enumerate() {
+                let (a, ga) = prepared.radiance_with_gradient(gk);
+                for c in 0..3 {
+                    worst = worst.max((a[c] - l[c].to_array()[k]).abs() / a[c].abs().max(1e-3));
+                    for j in 0..N_PARAMS {
+                        let b = grad[c][j].to_array()[k];
+                        worst = worst.max((ga[c][j] - b).abs() / ga[c][j].abs().max(1e-3));
+                    }
+                }
+            }
+        }
+        let mixed = [
+            pixel(1, 15.0),
+            pixel(2, 15.0),
+            pixel(3, 25.0),
+            pixel(4, 15.0),
+        ];
+        assert!(prepared
+            .radiance_with_gradient_x4([&mixed[0], &mixed[1], &mixed[2], &mixed[3]])
+            .is_none());
+        let mut away = [
+            pixel(1, 15.0),
+            pixel(2, 15.0),
+            pixel(3, 15.0),
+            pixel(4, 15.0),
+        ];
+        away[2].normal = -away[2].normal;
+        assert!(prepared
+            .radiance_with_gradient_x4([&away[0], &away[1], &away[2], &away[3]])
+            .is_none());
+    }
+    assert_eq!(taken, 750);
+    println!("four lanes against one pixel: largest relative difference {worst:.1e}");
+    // acos and ln within an ulp of the standard library's (model::lanes), amplified as in the
+    // test above by the Hermite sums' cancellation at the terminator (measured 1.1e-12).
+    assert!(worst < 3.3e-12, "{worst:e}");
+}
