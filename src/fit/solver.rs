@@ -599,18 +599,19 @@ impl Problem<'_> {
             .enumerate()
             .map(|(ci, chunk)| {
                 let mut acc: Vec<GroupSums> = (0..count).map(|_| GroupSums::new()).collect();
+                let zero = f64x4::splat(0.0);
+                let mut eval: Lanes4 = ([zero; 3], [[zero; N_PARAMS]; 3]);
                 let mut i = 0;
                 while i < chunk.len() {
                     let group = group_of(ci * CHUNK + i);
                     let four = chunk
                         .get(i..i + 4)
                         .filter(|_| (1..4).all(|k| group_of(ci * CHUNK + i + k) == group));
-                    let lanes = four.and_then(|f| {
-                        let eval = prepared
-                            .radiance_with_gradient_x4([0, 1, 2, 3].map(|k| &f[k].geometry))?;
-                        Some((f, eval))
-                    });
-                    if let Some((four, eval)) = lanes {
+                    if let Some(four) = four.filter(|f| {
+                        prepared
+                            .radiance_with_gradient_x4(four_geometries(f), &mut eval)
+                            .is_some()
+                    }) {
                         let sums = acc[group]
                             .four
                             .get_or_insert_with(|| Box::new(ChunkSums::new()));
@@ -717,6 +718,11 @@ impl Problem<'_> {
         };
         u.iter().all(|v| v.is_finite()).then_some((u, floor))
     }
+}
+
+/// The geometry of the first four of `obs`.
+fn four_geometries(obs: &[Obs]) -> [&Geometry; 4] {
+    [0, 1, 2, 3].map(|k| &obs[k].geometry)
 }
 
 /// One observation's weighted residuals and Jacobian rows into `sums`.

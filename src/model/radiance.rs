@@ -424,24 +424,30 @@ impl Model {
             None if want_grad => (self.reference_radius_mm / g.radius_mm).ln(),
             None => 0.0,
         };
+        let mut out = ([0.0; 3], [[0.0; N_PARAMS]; 3]);
+        let (radius_mm, out_ref) = (g.radius_mm, &mut out);
         self.shade(
             m,
             &cosines,
-            g.radius_mm,
+            radius_mm,
             ln_rr,
             want_grad,
+            out_ref,
             |c, theta, sigma| {
                 let slices =
                     slices.map_or([None, None], |s| [s.core[c].as_ref(), s.tail[c].as_ref()]);
                 self.profile_with(m, theta, sigma, slices)
             },
-        )
+        );
+        out
     }
 
-    /// The module formula and, with `want_grad`, its gradient, on one pixel or four ([`Real`])
-    /// of one radius whose n·v > 0, with the blur profile of channel c at (θ, σ_c) from
-    /// `profile`; `ln_rr` = ln(r_ref / r), needed only for the gradient.
+    /// The module formula into `out.0` and, with `want_grad`, its gradient into `out.1` (whose
+    /// entries it sets all), on one pixel or four ([`Real`]) of one radius whose n·v > 0, with
+    /// the blur profile of channel c at (θ, σ_c) from `profile`; `ln_rr` = ln(r_ref / r), needed
+    /// only for the gradient.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn shade<T: Real>(
         &self,
         m: &Material,
@@ -449,11 +455,10 @@ impl Model {
         radius_mm: f64,
         ln_rr: f64,
         want_grad: bool,
+        (out, grad): &mut ([T; 3], [[T; N_PARAMS]; 3]),
         profile: impl Fn(usize, T, f64) -> mixture::MixtureEval<T>,
-    ) -> ([T; 3], [[T; N_PARAMS]; 3]) {
+    ) {
         let zero = T::splat(0.0);
-        let mut out = [zero; 3];
-        let mut grad = [[zero; N_PARAMS]; 3];
         let (nl, nv) = (g.nl, g.nv);
         let theta = nl.acos();
         // sin θ for ∂f/∂(cos θ), once for the three channels.
@@ -488,6 +493,10 @@ impl Model {
                 continue;
             }
             let row = &mut grad[c];
+            for other in (0..3).filter(|&o| o != c) {
+                row[idx::SIGMA0 + other] = zero;
+                row[idx::ALBEDO + other] = zero;
+            }
             row[idx::SIGMA0 + c] = at * f.d_sigma * sigma / m.sigma0_mm[c];
             row[idx::ALBEDO + c] = t_exit * albedo_scale * f.value;
             row[idx::ETA] = (t_exit * mix.d_param - f.value * fr.d_eta) * a + spec.d_eta;
@@ -502,7 +511,6 @@ impl Model {
             row[idx::AZIMUTH] = d_nl * g.n_da + spec.d_lv * g.v_da;
             row[idx::ELEVATION] = d_nl * g.n_de + spec.d_lv * g.v_de;
         }
-        (out, grad)
     }
 }
 
@@ -550,10 +558,10 @@ impl Prepared {
     }
 
     /// [`Prepared::radiance_with_gradient`] at four pixels at once, in lanes ([`Real`]): their
-    /// radiance and gradient, lane k being pixel k's to a few units in the last place. `None`
-    /// unless the four share a radius whose table slices this model holds and every one faces
+    /// radiance and gradient into `out`, lane k being pixel k's to a few units in the last place.
+    /// `None` (and `out` untouched) unless the four share a radius whose table slices this model holds and every one faces
     /// the camera (n·v > 0): those are for the one-pixel path.
-    pub fn radiance_with_gradient_x4(&self, g: [&Geometry; 4]) -> Option<Lanes4> {
+    pub fn radiance_with_gradient_x4(&self, g: [&Geometry; 4], out: &mut Lanes4) -> Option<()> {
         let radius_mm = g[0].radius_mm;
         if g.iter().any(|p| p.radius_mm != radius_mm) {
             return None;
@@ -562,7 +570,7 @@ impl Prepared {
         let slices = self.slices.iter().find(|s| s.radius_mm == radius_mm)?;
         let sigma_scale = self.model.sigma_scale(m, radius_mm);
         let two = m.kernel_weight != 0.0;
-        let mut pairs = [(None, None); 3];
+        let mut pairs: [(Option<&Slice>, Option<&Slice>); 3] = [(None, None); 3];
         for (c, pair) in pairs.iter_mut().enumerate() {
             let sigma = m.sigma0_mm[c] / radius_mm * sigma_scale;
             let core = slices.core[c].as_ref().filter(|s| s.sigma == sigma)?;
@@ -592,19 +600,15 @@ impl Prepared {
         };
         let zero = f64x4::splat(0.0);
         let (w, s) = (m.kernel_weight, m.kernel_ratio);
-        Some(self.model.shade(
-            m,
-            &cosines,
-            radius_mm,
-            slices.ln_rr,
-            true,
-            |c, theta, sigma| {
-                let (core, tail) = pairs[c];
-                let core = core.expect("checked above").eval_in(theta);
-                let tail = tail.map(|t| (t.eval_in(theta), zero));
-                mixture::mix((core, zero), tail, sigma, (w, s))
-            },
-        ))
+        let profile = |c: usize, theta: f64x4, sigma: f64| {
+            let (core, tail) = pairs[c];
+            let core = core.expect("checked above").eval_in(theta);
+            let tail = tail.map(|t| (t.eval_in(theta), zero));
+            mixture::mix((core, zero), tail, sigma, (w, s))
+        };
+        let model = &self.model;
+        model.shade(m, &cosines, radius_mm, slices.ln_rr, true, out, profile);
+        Some(())
     }
 }
 

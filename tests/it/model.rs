@@ -472,12 +472,14 @@ fn four_lanes_equal_one_pixel_each() {
         for q in 0..500 {
             let radius = [15.0, 25.0, 35.0, 50.0][q % 4];
             let g: [Geometry; 4] = std::array::from_fn(|k| pixel(4 * q + k, radius));
-            let Some((l, grad)) = prepared.radiance_with_gradient_x4([&g[0], &g[1], &g[2], &g[3]])
-            else {
+            let mut out = Default::default();
+            let four = [&g[0], &g[1], &g[2], &g[3]];
+            let Some(()) = prepared.radiance_with_gradient_x4(four, &mut out) else {
                 assert_eq!(radius, 50.0, "refused a group of sliced radius {radius}");
                 continue;
             };
             assert_ne!(radius, 50.0, "took a radius without slices");
+            let (l, grad) = out;
             taken += 1;
             for (k, gk) in g.iter().enumerate() {
                 let (a, ga) = prepared.radiance_with_gradient(gk);
@@ -497,7 +499,10 @@ fn four_lanes_equal_one_pixel_each() {
             pixel(4, 15.0),
         ];
         assert!(prepared
-            .radiance_with_gradient_x4([&mixed[0], &mixed[1], &mixed[2], &mixed[3]])
+            .radiance_with_gradient_x4(
+                [&mixed[0], &mixed[1], &mixed[2], &mixed[3]],
+                &mut Default::default()
+            )
             .is_none());
         let mut away = [
             pixel(1, 15.0),
@@ -507,7 +512,10 @@ fn four_lanes_equal_one_pixel_each() {
         ];
         away[2].normal = -away[2].normal;
         assert!(prepared
-            .radiance_with_gradient_x4([&away[0], &away[1], &away[2], &away[3]])
+            .radiance_with_gradient_x4(
+                [&away[0], &away[1], &away[2], &away[3]],
+                &mut Default::default()
+            )
             .is_none());
     }
     assert_eq!(taken, 750);
