@@ -17,7 +17,7 @@
 //! dark floor").
 
 use crate::model::lanes::{f64x4, Real};
-use crate::model::{idx, Geometry, Lanes4, Model, Params, Prepared, N_PARAMS};
+use crate::model::{idx, Geometry, Gradient, Lanes4, Model, Params, Prepared, Rgb, N_PARAMS};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
@@ -348,22 +348,26 @@ impl Problem<'_> {
         let prepared = self.prepared(&params);
         let free = self.free_idx();
         let n = free.len();
-        let rows: Vec<([f64; 3], Vec<f64>)> = self
-            .obs
-            .par_iter()
-            .map(|o| {
-                let (l, g) = prepared.radiance_with_gradient(&o.geometry);
-                let r = [0, 1, 2].map(|c| o.weight[c] * (l[c] - o.radiance[c]));
-                let mut j = vec![];
-                if want_jacobian {
-                    j.reserve(3 * n);
-                    for (w, gc) in o.weight.iter().zip(&g) {
-                        for &k in &free {
-                            j.push(w * gc[k] * dpdu[k]);
-                        }
+        let row = |o: &Obs, l: &Rgb, g: &Gradient| {
+            let r = [0, 1, 2].map(|c| o.weight[c] * (l[c] - o.radiance[c]));
+            let mut j = vec![];
+            if want_jacobian {
+                j.reserve(3 * n);
+                for (w, gc) in o.weight.iter().zip(g) {
+                    for &k in &free {
+                        j.push(w * gc[k] * dpdu[k]);
                     }
                 }
-                (r, j)
+            }
+            (r, j)
+        };
+        let rows: Vec<([f64; 3], Vec<f64>)> = self
+            .obs
+            .par_chunks(CHUNK)
+            .flat_map_iter(|chunk| {
+                let mut rows = Vec::with_capacity(chunk.len());
+                each_model(&prepared, chunk, |o, l, g| rows.push(row(o, l, g)));
+                rows
             })
             .collect();
         // The floor profiled out: each channel's rows lose their projection on its weights.
@@ -717,6 +721,32 @@ impl Problem<'_> {
             [0.0; 3]
         };
         u.iter().all(|v| v.is_finite()).then_some((u, floor))
+    }
+}
+
+/// The model's radiance and gradient at each of `obs`, in order: four at a time in lanes where
+/// [`Prepared::radiance_with_gradient_x4`] takes them, else one at a time.
+fn each_model(prepared: &Prepared, obs: &[Obs], mut f: impl FnMut(&Obs, &Rgb, &Gradient)) {
+    let zero = f64x4::splat(0.0);
+    let mut eval: Lanes4 = ([zero; 3], [[zero; N_PARAMS]; 3]);
+    let mut i = 0;
+    while i < obs.len() {
+        if let Some(four) = obs.get(i..i + 4).filter(|f| {
+            prepared
+                .radiance_with_gradient_x4(four_geometries(f), &mut eval)
+                .is_some()
+        }) {
+            for (k, o) in four.iter().enumerate() {
+                let l = eval.0.map(|v| v.lane(k));
+                let g = eval.1.map(|row| row.map(|v| v.lane(k)));
+                f(o, &l, &g);
+            }
+            i += 4;
+            continue;
+        }
+        let (l, g) = prepared.radiance_with_gradient(&obs[i].geometry);
+        f(&obs[i], &l, &g);
+        i += 1;
     }
 }
 
