@@ -569,7 +569,9 @@ impl Problem<'_> {
 
     /// The raw normal equations ([`RawNormal`]) of each group of observations: `groups` gives
     /// each observation's group (0..count); `None`, one group of all. One pass over the
-    /// observations, in parallel chunks, summed in chunk order (the same result on every run).
+    /// observations, in parallel chunks, summed in chunk order (the same result on every run);
+    /// within a chunk, runs of four of one radius and group in lanes ([`Prepared::radiance_with_gradient_x4`]), the rest
+    /// one at a time.
     pub fn grouped_sums(&self, groups: Option<(&[usize], usize)>) -> Vec<RawNormal> {
         let (p, dpdu) = from_unbounded(&self.u);
         let prepared = self.prepared(&Params::from_vec(&p));
