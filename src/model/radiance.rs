@@ -425,14 +425,13 @@ impl Model {
             None => 0.0,
         };
         let mut out = ([0.0; 3], [[0.0; N_PARAMS]; 3]);
-        let (radius_mm, out_ref) = (g.radius_mm, &mut out);
         self.shade(
             m,
             &cosines,
-            radius_mm,
+            g.radius_mm,
             ln_rr,
             want_grad,
-            out_ref,
+            &mut out,
             |c, theta, sigma| {
                 let slices =
                     slices.map_or([None, None], |s| [s.core[c].as_ref(), s.tail[c].as_ref()]);
