@@ -400,6 +400,30 @@ fn model_pieces_are_what_the_readme_says() {
     assert_eq!(idx::KERNEL_RATIO, N_PARAMS - 1);
 }
 
+/// The kernel tests' parameters: the extensions (q, b) and two Gaussians on, or all off.
+fn extensions_on_or_off(plain: bool) -> Params {
+    let mut p = params(1.2, 0.35);
+    if plain {
+        p.material.sigma_exponent = 0.0;
+        p.material.albedo_curvature = 0.0;
+        p.material.kernel_weight = 0.0;
+    }
+    p
+}
+
+/// The kernel tests' pixel i of 2000 at a radius: normals spread over the visible hemisphere
+/// (across the terminator and the highlight), one view.
+fn kernel_pixel(i: usize, radius_mm: f64) -> Geometry {
+    let u = (i as f64 + 0.5) / 2000.0;
+    let (ph, ct) = (u * 371.0, 0.02 + 0.97 * (i as f64 * 0.618_034).fract());
+    let st = (1.0 - ct * ct).sqrt();
+    Geometry {
+        normal: Vector3::new(st * ph.cos(), st * ph.sin(), -ct),
+        view: Vector3::new(0.02, -0.01, -1.0).normalize(),
+        radius_mm,
+    }
+}
+
 /// The model prepared for many pixels (the fit's kernel: the CDRF table's slices at each radius's
 /// widths) is the model, to rounding: radiance and every gradient entry, over points across the
 /// terminator and the highlight, with the extensions and two Gaussians on and off, at radii with
@@ -409,22 +433,10 @@ fn prepared_model_equals_the_model() {
     let model = Model::default();
     let mut worst = 0.0f64;
     for plain in [false, true] {
-        let mut p = params(1.2, 0.35);
-        if plain {
-            p.material.sigma_exponent = 0.0;
-            p.material.albedo_curvature = 0.0;
-            p.material.kernel_weight = 0.0;
-        }
+        let p = extensions_on_or_off(plain);
         let prepared = model.prepare(&p, [15.0, 25.0, 35.0, 25.0]);
         for i in 0..2000 {
-            let u = (i as f64 + 0.5) / 2000.0;
-            let (ph, ct) = (u * 371.0, 0.02 + 0.97 * (i as f64 * 0.618_034).fract());
-            let st = (1.0 - ct * ct).sqrt();
-            let g = Geometry {
-                normal: Vector3::new(st * ph.cos(), st * ph.sin(), -ct),
-                view: Vector3::new(0.02, -0.01, -1.0).normalize(),
-                radius_mm: [15.0, 25.0, 35.0, 50.0][i % 4],
-            };
+            let g = kernel_pixel(i, [15.0, 25.0, 35.0, 50.0][i % 4]);
             let (a, ga) = model.radiance_with_gradient(&p, &g);
             let (b, gb) = prepared.radiance_with_gradient(&g);
             for c in 0..3 {
@@ -451,24 +463,9 @@ fn four_lanes_equal_one_pixel_each() {
     let mut worst = 0.0f64;
     let mut taken = 0;
     for plain in [false, true] {
-        let mut p = params(1.2, 0.35);
-        if plain {
-            p.material.sigma_exponent = 0.0;
-            p.material.albedo_curvature = 0.0;
-            p.material.kernel_weight = 0.0;
-        }
+        let p = extensions_on_or_off(plain);
         let prepared = model.prepare(&p, [15.0, 25.0, 35.0]);
-        let view = Vector3::new(0.02, -0.01, -1.0).normalize();
-        let pixel = |i: usize, radius_mm: f64| {
-            let u = (i as f64 + 0.5) / 2000.0;
-            let (ph, ct) = (u * 371.0, 0.02 + 0.97 * (i as f64 * 0.618_034).fract());
-            let st = (1.0 - ct * ct).sqrt();
-            Geometry {
-                normal: Vector3::new(st * ph.cos(), st * ph.sin(), -ct),
-                view,
-                radius_mm,
-            }
-        };
+        let pixel = kernel_pixel;
         for q in 0..500 {
             let radius = [15.0, 25.0, 35.0, 50.0][q % 4];
             let g: [Geometry; 4] = std::array::from_fn(|k| pixel(4 * q + k, radius));
