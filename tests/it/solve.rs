@@ -192,7 +192,11 @@ fn a_known_irradiance_makes_eta_measurable() {
     let err = (f.eta - t.eta).abs();
     assert!(err < 0.005, "η {}", f.eta);
     // Its stated std covers the error and is not the prior's.
-    assert!(err < 3.0 * f.std.eta && f.std.eta < 0.005, "η std {}", f.std.eta);
+    assert!(
+        err < 3.0 * f.std.eta && f.std.eta < 0.005,
+        "η std {}",
+        f.std.eta
+    );
     let ks = f.parameters.iter().find(|p| p.name == "ks").unwrap();
     assert!(ks.status.starts_with("fixed"), "{}", ks.status);
     assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.01);
