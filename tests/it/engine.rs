@@ -153,8 +153,10 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
             "{preset}: {}x{}, random-point error {e:.2e}, stated {stated:.2e}",
             t.w, t.h
         );
+        // Within the sidecar's statement, and that statement within 3× of what it measured
+        // (2026-12-04: 5.16e-4 found, 5.18e-4 stated; docs/engines.md).
         assert!(
-            e <= 1.05 * stated,
+            e <= 1.05 * stated && stated < 1.6e-3,
             "{preset}: {e:e} against the stated {stated:e}"
         );
         // The wrong origin reads another curvature's row: far off.
@@ -173,8 +175,11 @@ fn each_preset_samples_like_the_model_in_its_units_and_origin() {
         let e = worst(&t, &fit, &side, 1000.0, false);
         let stated = side["stored_error"]["max_rel"].as_f64().unwrap();
         println!("{format}: random-point error {e:.2e}, stated {stated:.2e}");
+        // Measured (2026-12-04): png16 5.16e-4 found, 5.18e-4 stated; 8-bit sRGB 4.00e-3 and
+        // 4.33e-3 (docs/engines.md); the caps 3× the statements.
+        let cap = if srgb { 1.3e-2 } else { 1.6e-3 };
         assert!(
-            e <= 1.05 * stated,
+            e <= 1.05 * stated && stated < cap,
             "{format}: {e:e} against the stated {stated:e}"
         );
     }
