@@ -438,7 +438,8 @@ fn outliers(dir: &Path, seed: u64) {
 
 #[test]
 fn heavy_noise_and_outliers() {
-    // 20% noise at 320×240: either within 5% or flagged (measured: degenerate, not converged).
+    // 20% noise at 320×240: either within 5% or flagged, and the stated std covers the σ0 error
+    // (measured: converged, σ0_g 45% off at 0.49 of its std, flagged by η's note on the prior).
     let o = run_case(
         "20% noise",
         config(|c| c.noise = 0.2),
@@ -452,6 +453,8 @@ fn heavy_noise_and_outliers() {
         "{:?}",
         o.0
     );
+    let truth = config(|_| {}).material.sigma0_mm;
+    assert!(sigma_error_in_std(o.1.as_ref().unwrap(), truth, "20% noise") < 3.0);
     // 5% outlier pixels, ten draws. Measured: σ0 off by 1–21% (median 6%, always high), the light
     // by 0.04–1.04°, with the impulses left out (src/fit/observe.rs; the residuals fall from
     // about 10% to 5% of the data, σ0 barely moves: the bias is not the fitted pixels'). The fit
@@ -468,8 +471,9 @@ fn heavy_noise_and_outliers() {
             WORST_OUTLIER_ERROR,
             1.5,
         );
-        accurate(&o, &name);
+        // Not an accurate measurement (σ0 up to 21% off) but a converged one, honest about it.
         let f = o.1.unwrap();
+        assert!(f.convergence.converged, "{name}: not converged");
         let truth = config(|_| {}).material.sigma0_mm;
         errors.push(
             (0..3)
@@ -479,9 +483,14 @@ fn heavy_noise_and_outliers() {
         assert!(sigma_error_in_std(&f, truth, &name) < 3.0, "{name}");
     }
     println!("5% outliers: σ0 errors over ten draws {errors:.4?}");
+    // Measured (2026-12-04): 0.9–20.7%, median 6.0%.
+    errors.sort_by(f64::total_cmp);
+    assert!(errors[9] < WORST_OUTLIER_ERROR, "{errors:?}");
+    assert!(errors[4] < 0.12, "median {errors:?}");
 }
 
-/// The largest σ0 error accepted over the ten outlier draws (21% measured).
+/// The largest σ0 error accepted over the ten outlier draws (21% measured): a cap on an error
+/// the fit's stated std must cover (checked per draw), not a claim of accuracy.
 const WORST_OUTLIER_ERROR: f64 = 0.3;
 
 #[test]
