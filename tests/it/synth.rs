@@ -309,30 +309,46 @@ fn jpeg_carries_exif_that_kamadak_exif_reads() {
 #[test]
 fn bad_configurations_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    for cfg in [
-        SessionConfig {
-            radii_mm: vec![],
-            ..small_session()
-        },
-        SessionConfig {
-            radii_mm: vec![10.0, -3.0],
-            ..small_session()
-        },
-        SessionConfig {
-            exposure: f64::NAN,
-            ..small_session()
-        },
-        SessionConfig {
-            supersample: 0,
-            ..small_session()
-        },
-        SessionConfig {
-            distance_mm: Some(40.0),
-            ..small_session()
-        },
+    // Each refusal names what is wrong.
+    for (cfg, names) in [
+        (
+            SessionConfig {
+                radii_mm: vec![],
+                ..small_session()
+            },
+            "at least one radius",
+        ),
+        (
+            SessionConfig {
+                radii_mm: vec![10.0, -3.0],
+                ..small_session()
+            },
+            "radius -3 mm is not positive",
+        ),
+        (
+            SessionConfig {
+                exposure: f64::NAN,
+                ..small_session()
+            },
+            "exposure must be positive",
+        ),
+        (
+            SessionConfig {
+                supersample: 0,
+                ..small_session()
+            },
+            "supersample must be between 1 and 16",
+        ),
+        (
+            SessionConfig {
+                distance_mm: Some(40.0),
+                ..small_session()
+            },
+            "distance of 40 mm",
+        ),
     ] {
         let e = session::generate(&cfg, dir.path(), None, true).unwrap_err();
-        assert!(!e.to_string().is_empty());
+        assert!(e.to_string().contains(names), "{e}");
     }
     assert_eq!(
         std::fs::read_dir(dir.path()).unwrap().count(),
