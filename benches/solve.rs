@@ -6,9 +6,10 @@
 //!    auto) — run time against the deviation from the every-pixel fit and the error against truth;
 //!    a plot in `target/bench-solve/reduction.{png,svg}`;
 //! 3. 5 photos of 24 MP: solve time against the time to decode the photos (same run);
-//! 4. a physically based session (Mitsuba, `datasets/mitsuba/render.py`) when `PBR_SESSION` names
-//!    its folder: each radius held out in turn, joint against paper, next to the render's own noise
-//!    level (its scene.json), the light error against the scene's, and the model choice.
+//! 4. a physically based session with a `truth.json` (datasets/pbr-wax, datasets/pbr-soap,
+//!    ../shared/data/pbr-jade) when `PBR_SESSION` names its folder, solved in a copy: each radius
+//!    held out in turn, joint against paper, next to the render's own noise level, the light error
+//!    against the truth's, and the model choice.
 //!
 //! Prints Markdown tables. `--quick` skips the 24 MP part and the 5% JPEG session; `--pbr-only`
 //! runs part 4 alone.
@@ -250,25 +251,38 @@ fn large(out: &Path) {
     let _ = out;
 }
 
-fn pbr(dir: &Path) {
-    let scene: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("scene.json")).unwrap()).unwrap();
-    let l_true: [f64; 3] = serde_json::from_value(scene["light_direction"].clone()).unwrap();
-    let noise: Vec<(f64, f64)> = scene["noise"]
+/// Part 4 on a physically based session with a `truth.json` (`workbench synth pbr`'s, as
+/// datasets/pbr-wax, or ../shared/data/pbr-jade's), solved in a copy of its folder.
+fn pbr(src: &Path) {
+    let copy = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_file() {
+            std::fs::copy(&p, copy.path().join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    let dir = copy.path();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    let l_true: [f64; 3] =
+        serde_json::from_value(truth["light"]["direction_to_light_camera_frame"].clone()).unwrap();
+    // Each photo's radius (one sphere a photo) and the render's own relative noise.
+    let noise: Vec<(f64, f64)> = truth["images"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|n| {
-            (
-                n["radius_mm"].as_f64().unwrap(),
-                n["rel_noise"].as_f64().unwrap(),
-            )
+        .map(|im| {
+            let r = im["radius_mm"]
+                .as_f64()
+                .or_else(|| im["spheres"][0]["radius_mm"].as_f64())
+                .unwrap();
+            (r, im["noise_rel_median_lit"].as_f64().unwrap())
         })
         .collect();
     println!(
-        "\nPhysically based session {} (lamp angular radius {:.2}°)\n",
-        dir.display(),
-        scene["lamp"]["angular_radius_deg"].as_f64().unwrap()
+        "\nPhysically based session {} ({})\n",
+        src.display(),
+        truth["what"].as_str().unwrap_or("")
     );
     let joint = solve_with(dir, "fit-bench-joint.json", |_| {});
     let paper = solve_with(dir, "fit-bench-paper.json", |o| o.method = Method::Paper);
