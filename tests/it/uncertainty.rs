@@ -350,3 +350,66 @@ fn linear_jackknife_matches_the_refits() {
         assert!(worst < if robust { 0.03 } else { 5e-5 }, "{worst}");
     }
 }
+
+/// `workbench solve --holdout 15` with the defaults, against the paper's procedure
+/// (`--method paper --holdout 15`) in the same test, on the physically based sessions
+/// (docs/commands.md, docs/uncertainty.md): the 15 mm sphere left out of the fit and predicted.
+/// Measured (2026-12-04), joint / paper relative RMSE: wax 4.12% / 14.99%, soap 7.47% / 13.71%,
+/// jade 4.24% / 20.03%.
+#[test]
+fn an_unseen_15_mm_sphere_is_predicted_better_than_by_the_papers_procedure() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut sessions = vec![
+        (repo.join("datasets/pbr-wax"), 0.0412, 0.1499),
+        (repo.join("datasets/pbr-soap"), 0.0747, 0.1371),
+    ];
+    if let Some(shared) = common::shared_data() {
+        sessions.push((shared.join("pbr-jade"), 0.0424, 0.2003));
+    }
+    for (src, joint_measured, paper_measured) in sessions {
+        let copy = tempfile::tempdir().unwrap();
+        for e in std::fs::read_dir(&src).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            if p.is_file() && !["fit.json", "detections.json"].contains(&name.as_str()) {
+                std::fs::copy(&p, copy.path().join(name)).unwrap();
+            }
+        }
+        let held = |method: &str| {
+            let out = copy.path().join(format!("fit-{method}.json"));
+            let dir = copy.path().to_str().unwrap();
+            let args = [
+                "--quiet",
+                "solve",
+                dir,
+                "--method",
+                method,
+                "--holdout",
+                "15",
+            ];
+            let (code, _, err) =
+                common::wb(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+            assert_eq!(code, 0, "{err}");
+            let f: FitFile = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+            let h = f.holdout.expect("a held-out sphere");
+            assert_eq!(h.radius_mm, 15.0);
+            h.rel_rmse
+        };
+        let (joint, paper) = (held("joint"), held("paper"));
+        let name = src.file_name().unwrap().to_string_lossy().to_string();
+        println!(
+            "{name}: 15 mm held out, joint {:.2}%, paper {:.2}%",
+            100.0 * joint,
+            100.0 * paper
+        );
+        // Both near what was measured (the data and the fit are deterministic; 15% either way),
+        // and the joint fit at most 0.6 of the paper's error.
+        for (v, m) in [(joint, joint_measured), (paper, paper_measured)] {
+            assert!(
+                (v / m - 1.0).abs() < 0.15,
+                "{name}: {v} against {m} measured"
+            );
+        }
+        assert!(joint < 0.6 * paper, "{name}: joint {joint}, paper {paper}");
+    }
+}
