@@ -90,7 +90,8 @@ fn joint_fit_recovers_the_truth_and_says_how_it_was_reached() {
     );
     assert_eq!(f.schema, "workbench.fit/1");
     assert!(f.convergence.converged);
-    assert!(es < 0.01, "σ0 {es}");
+    // Measured (2026-12-04): σ0 0.193%, albedo 0.313%, light 0.0357°.
+    assert!(es < 0.006, "σ0 {es}");
     assert!(ea < 0.01, "albedo {ea}");
     assert!(el < 0.1, "light {el}°");
     let sp = f.specular.unwrap();
@@ -222,7 +223,8 @@ fn a_bad_start_still_converges() {
         f.convergence.stages.len()
     );
     assert!(f.convergence.converged);
-    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.01);
+    // Measured (2026-12-04): σ0 0.193% off at worst, the light 0.0357°: as from the default start.
+    assert!(worst(&f.sigma0_mm, &t.sigma0_mm) < 0.006);
     assert!(light_err(&f, &t) < 0.1);
 }
 
