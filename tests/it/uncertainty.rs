@@ -82,7 +82,7 @@ fn z_over_seeds(
 ) -> Vec<(String, f64, f64)> {
     let mut all = vec![];
     for seed in seeds {
-        let dir = session_with(seed, camera.clone());
+        let dir = session_with(seed, camera);
         let t: SessionTruth =
             serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
                 .unwrap();
