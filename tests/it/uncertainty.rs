@@ -329,16 +329,7 @@ fn pbr_session_defaults(name: &str, expect_held: bool, heldout_measured: [f64; 5
     let src = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("datasets")
         .join(name);
-    let dir = tempfile::tempdir().unwrap();
-    // The session as the repository holds it: what an earlier run wrote beside it (detections,
-    // overlays, a fit) is not copied.
-    for e in std::fs::read_dir(&src).unwrap() {
-        let p = e.unwrap().path();
-        let name = p.file_name().unwrap().to_string_lossy().into_owned();
-        if p.is_file() && name != "detections.json" && name != "fit.json" {
-            std::fs::copy(&p, dir.path().join(&name)).unwrap();
-        }
-    }
+    let dir = common::session_copy(&src);
     let truth: workbench::synth::volpath::PbrTruth =
         serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
     let l = Vector3::from(truth.light.direction_to_light_camera_frame);
@@ -477,14 +468,7 @@ fn an_unseen_15_mm_sphere_is_predicted_better_than_by_the_papers_procedure() {
         sessions.push((shared.join("pbr-jade"), 0.0424, 0.2003));
     }
     for (src, joint_measured, paper_measured) in sessions {
-        let copy = tempfile::tempdir().unwrap();
-        for e in std::fs::read_dir(&src).unwrap() {
-            let p = e.unwrap().path();
-            let name = p.file_name().unwrap().to_string_lossy().to_string();
-            if p.is_file() && !["fit.json", "detections.json"].contains(&name.as_str()) {
-                std::fs::copy(&p, copy.path().join(name)).unwrap();
-            }
-        }
+        let copy = common::session_copy(&src);
         let held = |method: &str| {
             let out = copy.path().join(format!("fit-{method}.json"));
             let dir = copy.path().to_str().unwrap();

@@ -232,3 +232,17 @@ pub fn wb(args: &[&str]) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// A copy of a session folder's files in a temporary folder, as the repository or ../shared holds
+/// it: what an earlier run wrote beside it (detections.json, fit.json, overlays) is left behind.
+pub fn session_copy(src: &std::path::Path) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        if p.is_file() && name != "detections.json" && name != "fit.json" {
+            std::fs::copy(&p, dir.path().join(&name)).unwrap();
+        }
+    }
+    dir
+}
