@@ -605,29 +605,17 @@ impl Problem<'_> {
             .enumerate()
             .map(|(ci, chunk)| {
                 let mut acc: Vec<GroupSums> = (0..count).map(|_| GroupSums::new()).collect();
-                let zero = f64x4::splat(0.0);
-                let mut eval: Lanes4 = ([zero; 3], [[zero; N_PARAMS]; 3]);
-                let mut i = 0;
-                while i < chunk.len() {
-                    let group = group_of(ci * CHUNK + i);
-                    let four = chunk
-                        .get(i..i + 4)
-                        .filter(|_| (1..4).all(|k| group_of(ci * CHUNK + i + k) == group));
-                    if let Some(four) = four.filter(|f| {
-                        prepared
-                            .radiance_with_gradient_x4(four_geometries(f), &mut eval)
-                            .is_some()
-                    }) {
-                        let sums = acc[group]
+                let group = |i: usize| group_of(ci * CHUNK + i);
+                let together = |i: usize| (1..4).all(|k| group(i + k) == group(i));
+                walk_in_fours(&prepared, chunk, together, |i, step| match step {
+                    Step::Four(four, eval) => {
+                        let sums = acc[group(i)]
                             .four
                             .get_or_insert_with(|| Box::new(ChunkSums::new()));
-                        add_four(sums, four, &eval, &rows, floor);
-                        i += 4;
-                        continue;
+                        add_four(sums, four, eval, &rows, floor);
                     }
-                    add_one(&mut acc[group].one, &chunk[i], &prepared, &rows, floor);
-                    i += 1;
-                }
+                    Step::One(o) => add_one(&mut acc[group(i)].one, o, &prepared, &rows, floor),
+                });
                 acc.into_iter()
                     .map(|a| a.scatter(&layout, n, floor))
                     .collect::<Vec<_>>()
@@ -726,30 +714,63 @@ impl Problem<'_> {
     }
 }
 
-/// The model's radiance and gradient at each of `obs`, in order: four at a time in lanes where
-/// [`Prepared::radiance_with_gradient_x4`] takes them, else one at a time.
-fn each_model(prepared: &Prepared, obs: &[Obs], mut f: impl FnMut(&Obs, &Rgb, &Gradient)) {
+/// One step of [`walk_in_fours`]: four observations with the model evaluated on them in lanes, or
+/// one observation alone.
+enum Step<'a> {
+    Four(&'a [Obs], &'a Lanes4),
+    One(&'a Obs),
+}
+
+/// Walk `obs` in order: each run of four from index i that `together(i)` allows and that
+/// [`Prepared::radiance_with_gradient_x4`] takes goes to `f` as one [`Step::Four`], every other
+/// observation as a [`Step::One`]; `f` is given the step's first index.
+fn walk_in_fours(
+    prepared: &Prepared,
+    obs: &[Obs],
+    together: impl Fn(usize) -> bool,
+    mut f: impl FnMut(usize, Step),
+) {
     let zero = f64x4::splat(0.0);
     let mut eval: Lanes4 = ([zero; 3], [[zero; N_PARAMS]; 3]);
     let mut i = 0;
     while i < obs.len() {
-        if let Some(four) = obs.get(i..i + 4).filter(|f| {
-            prepared
-                .radiance_with_gradient_x4(four_geometries(f), &mut eval)
-                .is_some()
-        }) {
-            for (k, o) in four.iter().enumerate() {
-                let l = eval.0.map(|v| v.lane(k));
-                let g = eval.1.map(|row| row.map(|v| v.lane(k)));
+        let four = obs.get(i..i + 4).filter(|four| {
+            together(i)
+                && prepared
+                    .radiance_with_gradient_x4(four_geometries(four), &mut eval)
+                    .is_some()
+        });
+        if let Some(four) = four {
+            f(i, Step::Four(four, &eval));
+            i += 4;
+        } else {
+            f(i, Step::One(&obs[i]));
+            i += 1;
+        }
+    }
+}
+
+/// The model's radiance and gradient at each of `obs`, in order ([`walk_in_fours`]: four at a
+/// time in lanes where it can, else one at a time).
+fn each_model(prepared: &Prepared, obs: &[Obs], mut f: impl FnMut(&Obs, &Rgb, &Gradient)) {
+    walk_in_fours(
+        prepared,
+        obs,
+        |_| true,
+        |_, step| match step {
+            Step::Four(four, (l, grad)) => {
+                for (k, o) in four.iter().enumerate() {
+                    let l = l.map(|v| v.lane(k));
+                    let g = grad.map(|row| row.map(|v| v.lane(k)));
+                    f(o, &l, &g);
+                }
+            }
+            Step::One(o) => {
+                let (l, g) = prepared.radiance_with_gradient(&o.geometry);
                 f(o, &l, &g);
             }
-            i += 4;
-            continue;
-        }
-        let (l, g) = prepared.radiance_with_gradient(&obs[i].geometry);
-        f(&obs[i], &l, &g);
-        i += 1;
-    }
+        },
+    );
 }
 
 /// The geometry of the first four of `obs`.

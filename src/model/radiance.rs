@@ -362,11 +362,15 @@ impl Model {
                             .then(|| table.slice(m.kernel_ratio * s))
                             .flatten()
                     });
+                    // Four pixels at a time need every slice this radius reads.
+                    let lanes = core.iter().all(Option::is_some)
+                        && (m.kernel_weight == 0.0 || tail.iter().all(Option::is_some));
                     RadiusSlices {
                         radius_mm: r,
                         ln_rr: (self.reference_radius_mm / r).ln(),
                         core,
                         tail,
+                        lanes,
                     }
                 })
                 .collect()
@@ -537,6 +541,9 @@ struct RadiusSlices {
     ln_rr: f64,
     core: [Option<Slice>; 3],
     tail: [Option<Slice>; 3],
+    /// Every slice the model reads at this radius is here (each core and, with two Gaussians,
+    /// each tail): the four-pixel path may take it.
+    lanes: bool,
 }
 
 /// The model at fixed parameters for many pixels ([`Model::prepare`]): what every pixel shares —
@@ -566,20 +573,11 @@ impl Prepared {
             return None;
         }
         let m = &self.params.material;
-        let slices = self.slices.iter().find(|s| s.radius_mm == radius_mm)?;
-        let sigma_scale = self.model.sigma_scale(m, radius_mm);
-        let two = m.kernel_weight != 0.0;
-        let mut pairs: [(Option<&Slice>, Option<&Slice>); 3] = [(None, None); 3];
-        for (c, pair) in pairs.iter_mut().enumerate() {
-            let sigma = m.sigma0_mm[c] / radius_mm * sigma_scale;
-            let core = slices.core[c].as_ref().filter(|s| s.sigma == sigma)?;
-            let tail = match &slices.tail[c] {
-                Some(t) if two && t.sigma == m.kernel_ratio * sigma => Some(t),
-                _ if two => return None,
-                _ => None,
-            };
-            *pair = (Some(core), tail);
-        }
+        let slices = self
+            .slices
+            .iter()
+            .find(|s| s.radius_mm == radius_mm)
+            .filter(|s| s.lanes)?;
         let n: [f64x4; 3] = std::array::from_fn(|i| f64x4::new(g.map(|p| p.normal[i])));
         let v: [f64x4; 3] = std::array::from_fn(|i| f64x4::new(g.map(|p| p.view[i])));
         let dot = |a: &[f64x4; 3], b: &Vector3<f64>| a[0] * b.x + a[1] * b.y + a[2] * b.z;
@@ -600,10 +598,10 @@ impl Prepared {
         let zero = f64x4::splat(0.0);
         let (w, s) = (m.kernel_weight, m.kernel_ratio);
         let profile = |c: usize, theta: f64x4, sigma: f64| {
-            let (core, tail) = pairs[c];
-            let core = core.expect("checked above").eval_in(theta);
+            let core = slices.core[c].as_ref().expect("a lanes radius");
+            let tail = slices.tail[c].as_ref().filter(|_| w != 0.0);
             let tail = tail.map(|t| (t.eval_in(theta), zero));
-            mixture::mix((core, zero), tail, sigma, (w, s))
+            mixture::mix((core.eval_in(theta), zero), tail, sigma, (w, s))
         };
         let model = &self.model;
         model.shade(m, &cosines, radius_mm, slices.ln_rr, true, out, profile);

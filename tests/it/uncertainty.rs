@@ -204,11 +204,7 @@ fn jade_errors_are_covered_or_flagged() {
         return;
     };
     let src = data.join("pbr-jade");
-    let dir = tempfile::tempdir().unwrap();
-    for e in std::fs::read_dir(&src).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
-    }
+    let dir = common::session_copy(&src);
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
     let l: Vec<f64> = truth["light"]["direction_to_light_camera_frame"]
