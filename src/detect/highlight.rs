@@ -69,6 +69,10 @@ pub struct Highlight {
     pub method: Method,
     /// Fitted GGX roughness (lobe fit only).
     pub alpha: Option<f64>,
+    /// Its standard error (lobe fit only): the formal one combined with the trend model's error,
+    /// the larger of half the difference to the α fitted with the other kind of diffuse trend and
+    /// the shift when the clipped pixels are left out rather than censored (as for the light).
+    pub alpha_std: Option<f64>,
     /// Saturated pixels in the highlight.
     pub saturated: usize,
     /// Angular radius of the highlight region on the sphere (normals within it are flagged).
@@ -617,6 +621,7 @@ impl<'a> Area<'a> {
             cov,
             method: Method::Centroid,
             alpha: None,
+            alpha_std: None,
             saturated: clipped,
             radius: (rw / self.r_px).min(1.0).asin() * 2.0 + 0.02,
             trend_spread: 0.0,
@@ -768,31 +773,43 @@ impl<'a> Area<'a> {
         // The angles are steps along the last pass's basis (b1, b2) at its start direction.
         let e = Matrix3x2::from_columns(&[b1, b2]);
         let c2 = Matrix2::new(cov3[(0, 0)], cov3[(0, 1)], cov3[(1, 0)], cov3[(1, 1)]);
-        let shading_light = {
-            let f2 = Fit {
+        // Each alternative fit's light and roughness, when it finds a lobe.
+        let refit = |f: &Fit, pix: &[Px]| {
+            solve(f, pix, x).and_then(|(x2, _, lin, _)| {
+                (lin[NLIN - 1] > 0.0).then(|| (f.light(&x2), x2.z.exp()))
+            })
+        };
+        let shading = refit(
+            &Fit {
                 trend: Trend::Shading,
                 ..fit
-            };
-            solve(&f2, &pix, x)
-                .and_then(|(x2, _, lin, _)| (lin[NLIN - 1] > 0.0).then(|| f2.light(&x2)))
-        };
-        let uncensored_light = if pix.iter().any(|p| p.clipped) {
+            },
+            &pix,
+        );
+        let uncensored = if pix.iter().any(|p| p.clipped) {
             let kept: Vec<Px> = pix.iter().filter(|p| !p.clipped).copied().collect();
-            solve(&fit, &kept, x)
-                .and_then(|(x2, _, lin, _)| (lin[NLIN - 1] > 0.0).then(|| fit.light(&x2)))
+            refit(&fit, &kept)
         } else {
             None
         };
-        let (l, spread) = match shading_light {
-            Some(l2) if l2.angle(&l) < 0.35 => {
+        let (l, spread, alpha_spread) = match shading {
+            Some((l2, a2)) if l2.angle(&l) < 0.35 => {
                 let mid = (l + l2).normalize();
-                let censoring = uncensored_light.map_or(0.0, |l3| l3.angle(&l));
-                (mid, (0.5 * l2.angle(&l)).max(censoring))
+                let (censoring, alpha_censoring) =
+                    uncensored.map_or((0.0, 0.0), |(l3, a3)| (l3.angle(&l), (a3 - alpha).abs()));
+                (
+                    mid,
+                    (0.5 * l2.angle(&l)).max(censoring),
+                    (0.5 * (a2 - alpha).abs()).max(alpha_censoring),
+                )
             }
             // The other trend found no lobe, or one far away: the trend decides, so the light is
             // not measured by this highlight.
             _ => return None,
         };
+        // x.z is ln α: its variance times α² is α's.
+        let alpha_std =
+            (alpha * alpha * cov3[(2, 2)].max(0.0) + alpha_spread * alpha_spread).sqrt();
         let q = self.outline.mirror_point(&l)?;
         let px = self.proj.pixel(&q)?;
         let tangent = Matrix3::identity() - l * l.transpose();
@@ -802,6 +819,7 @@ impl<'a> Area<'a> {
             cov: e * c2 * e.transpose() + tangent * spread * spread,
             method: Method::LobeFit,
             alpha: Some(alpha),
+            alpha_std: Some(alpha_std),
             saturated: clipped_area,
             // Past a clipped core: the solve keeps the pixels within this radius for the lobe,
             // and one inside the core left it none (0.9° of light error at 26% clipped). 6° past

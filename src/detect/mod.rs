@@ -685,6 +685,7 @@ fn sphere_detection(
         highlight: hl.map(|h| HighlightJson {
             method: h.method,
             alpha: h.alpha,
+            alpha_std: h.alpha_std,
             saturated_px: h.saturated,
             radius_deg: h.radius.to_degrees(),
             outlier,

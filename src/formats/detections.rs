@@ -63,6 +63,9 @@ pub struct HighlightJson {
     /// Fitted GGX roughness (lobe fit).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alpha: Option<f64>,
+    /// Its standard error: formal, with the diffuse trend's and the clipping's share (lobe fit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_std: Option<f64>,
     pub saturated_px: usize,
     /// Angular radius around the mirror direction whose pixels are flagged as highlight.
     pub radius_deg: f64,

@@ -107,6 +107,7 @@ pub(super) fn load_inspected(
     );
     let (light, light_std, frames) = lights(&sess, &detections, &report, &mut skipped)?;
     let (highlight_radius, alpha) = highlight_radius_alpha(&detections);
+    let alpha_std = alpha.and_then(|_| highlight_alpha_std(&detections));
     let obs = observe::observe(
         &report,
         &sess,
@@ -144,6 +145,7 @@ pub(super) fn load_inspected(
         light_std,
         highlight_radius,
         alpha,
+        alpha_std,
         fit_floor,
         pixel_scale: pixel_scale(&report),
     };
@@ -352,4 +354,21 @@ fn highlight_radius_alpha(detections: &Detections) -> (Option<f64>, Option<f64>)
     alphas.sort_by(|a, b| a.total_cmp(b));
     let alpha = alphas.get(alphas.len() / 2).copied();
     (highlight_radius, alpha)
+}
+
+/// The standard error of the highlights' roughness: the median of the lobe fits' own, not
+/// divided by their number (most of it is the diffuse trend's error, which every sphere of a
+/// session shares). `None` when a detections.json written before the field has none.
+fn highlight_alpha_std(detections: &Detections) -> Option<f64> {
+    let mut stds: Vec<f64> = detections
+        .images
+        .iter()
+        .flat_map(|i| i.spheres.iter())
+        .filter_map(|s| s.highlight.as_ref())
+        .filter(|h| !h.outlier && h.alpha.is_some())
+        .filter_map(|h| h.alpha_std)
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .collect();
+    stds.sort_by(|a, b| a.total_cmp(b));
+    stds.get(stds.len() / 2).copied()
 }

@@ -262,9 +262,13 @@ mod with_opencv {
         );
         assert_eq!(r.pattern, Pattern { cols: 9, rows: 6 });
         assert_eq!(r.calibration.used.len(), 14);
-        assert!((c.fx / t.fx - 1.0).abs() < 2e-3 && (c.fy / t.fy - 1.0).abs() < 2e-3);
-        assert!((c.cx - t.cx).abs() < 1.0 && (c.cy - t.cy).abs() < 1.0);
-        assert!((c.distortion.k1 - t.distortion.k1).abs() < 0.01);
+        // Measured: fx, fy +0.043%, cx −0.21 px, cy −0.06 px, k1 1e-5, k2 −0.0012; each capped
+        // at about 3× that (k1 at 3e-3, a third of k2's trade-off with it), and each within 3 of
+        // the std intrinsics.json states (checked below).
+        assert!((c.fx / t.fx - 1.0).abs() < 1.5e-3 && (c.fy / t.fy - 1.0).abs() < 1.5e-3);
+        assert!((c.cx - t.cx).abs() < 0.6 && (c.cy - t.cy).abs() < 0.6);
+        assert!((c.distortion.k1 - t.distortion.k1).abs() < 3e-3);
+        assert!((c.distortion.k2 - t.distortion.k2).abs() < 4e-3);
         // EXIF of the JPEGs: fx agrees with the lens (the rounded 35 mm equivalent); the note gives
         // the lens's fx and the fitted one's offset from it, and does not warn (beyond 10%).
         let lens = r
@@ -291,7 +295,15 @@ mod with_opencv {
             serde_json::from_str(&std::fs::read_to_string(&r.intrinsics_file).unwrap()).unwrap();
         assert_eq!(j["schema"], "workbench.intrinsics/1");
         assert_eq!(j["views"].as_array().unwrap().len(), 14);
-        assert!(j["std"]["fx"].as_f64().unwrap() > 0.0);
+        let std = |k: &str| j["std"][k].as_f64().unwrap();
+        let z = [
+            (c.fx - t.fx) / std("fx"),
+            (c.fy - t.fy) / std("fy"),
+            (c.cx - t.cx) / std("cx"),
+            (c.cy - t.cy) / std("cy"),
+        ];
+        println!("error / stated std: fx, fy, cx, cy {z:.2?}");
+        assert!(z.iter().all(|z| z.abs() < 3.0), "{z:?}");
         let back = workbench::calibrate::cv::read_filestorage_yaml(
             &std::fs::read_to_string(&r.yaml_file).unwrap(),
         )

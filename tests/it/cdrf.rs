@@ -54,7 +54,7 @@ fn thetas() -> Vec<f64> {
 }
 
 #[test]
-fn closed_form_matches_quadrature_within_1e_10() {
+fn closed_form_matches_quadrature() {
     let mut worst = (0.0f64, 0.0, 0.0, "");
     for &s in &sigmas() {
         for &t in &thetas() {
@@ -73,7 +73,8 @@ fn closed_form_matches_quadrature_within_1e_10() {
         "worst |closed form − quadrature| = {:.2e} at σ={}, θ={} ({})",
         worst.0, worst.1, worst.2, worst.3
     );
-    assert!(worst.0 <= 1e-10, "{worst:?}");
+    // Measured 2.9e-13 (the goal was 1e-10).
+    assert!(worst.0 <= 1e-12, "{worst:?}");
 }
 
 #[test]

@@ -147,7 +147,8 @@ fn samples_carry_exposure_normalised_radiance_and_geometry() {
         assert!((sp.normal.dot(&sp.view).acos() - x.phi).abs() < 0.02);
     }
     println!("worst θ error {:.4}°", worst_theta.to_degrees());
-    assert!(worst_theta.to_degrees() < 0.5);
+    // Measured 0.10°: the detected outline against the true sphere.
+    assert!(worst_theta.to_degrees() < 0.3);
 }
 
 #[test]
@@ -530,8 +531,9 @@ fn grey_backdrop_and_table() {
             );
             assert!(e.abs() < 2e-5, "{backdrop} channel {c}: floor off by {e}");
         }
-        // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.32% from black; the goals 0.05° and 0.5%.
-        assert!(dl < 0.05, "{backdrop}: {dl}°");
+        // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.28% from black; the goal 0.5% for σ0,
+        // about 3× the measured light's error for the light.
+        assert!(dl < 0.02, "{backdrop}: {dl}°");
         assert!(sigma0_off(&f) < 0.005, "{backdrop}: {}", sigma0_off(&f));
         // With it given (truth's ambient), σ0 as on black.
         let p = dir.path().join("session.json");
@@ -544,7 +546,7 @@ fn grey_backdrop_and_table() {
             .angle(&Vector3::from(t.light_direction))
             .to_degrees();
         println!("{backdrop}: solved light {dl:.4}°");
-        assert!(dl < 0.05, "{backdrop}: {dl}°");
+        assert!(dl < 0.02, "{backdrop}: {dl}°");
         assert!(f.dark_floor.is_none());
         let worst = sigma0_off(&f);
         println!(
@@ -553,7 +555,7 @@ fn grey_backdrop_and_table() {
             f_black.sigma0_mm,
             100.0 * worst
         );
-        // Measured 0.27% (grey), 0.37% (table), 0.27% (pin); the goal 0.5%.
+        // Measured 0.21% (grey), 0.37% (table), 0.21% (pin); the goal 0.5%.
         assert!(worst < 0.005, "{backdrop}: {worst}");
     }
 }

@@ -34,7 +34,7 @@ fn frame_grid(cam: &Camera, step: usize) -> Vec<Vector2<f64>> {
 }
 
 #[test]
-fn undistort_converges_below_1e_9_px_over_the_whole_frame() {
+fn undistort_converges_over_the_whole_frame() {
     let mut worst = 0.0f64;
     let mut n = 0;
     for &k1 in &[-0.5, -0.3, -0.1, 0.1, 0.3, 0.5] {
@@ -57,7 +57,8 @@ fn undistort_converges_below_1e_9_px_over_the_whole_frame() {
         }
     }
     println!("{n} pixels: worst re-projection of the undistorted point {worst:.2e} px");
-    assert!(worst < 1e-9, "{worst}");
+    // Measured 1.0e-10 px (the goal was 1e-9).
+    assert!(worst < 3e-10, "{worst}");
 }
 
 #[test]

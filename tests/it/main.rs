@@ -8,6 +8,7 @@ mod cdrf;
 mod cli;
 mod curvature;
 mod detect;
+mod docs;
 mod engine;
 mod exif;
 mod export;

@@ -439,7 +439,8 @@ fn extensions_are_chosen_by_held_out_error() {
         mc.chosen, mc.reason, f.sigma_exponent, f.std.sigma_exponent
     );
     assert!(mc.chosen.contains("sigma-exponent"), "{}", mc.chosen);
-    assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 0.05);
+    // Measured 0.601 ± 0.0013.
+    assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 0.004);
     // On plain data the plain model is kept.
     let guard = default_session();
     let plain = solve_with(guard.path(), "fit-ext.json", |o| {
@@ -714,7 +715,9 @@ fn one_light_per_photo() {
         println!("{}: light {dl:.4}° from its truth", il.file);
         assert!(dl < 0.1, "{}: {dl}°", il.file);
     }
+    // Measured 0.45% (one light per photo) and 0.43% (shared).
     assert!(e_per < 2.0 * e_shared.max(0.002), "{e_per} vs {e_shared}");
+    assert!(e_per < 0.012, "{e_per}");
 }
 
 /// The tabulated CDRF (the default) fits as the closed form does: on the default session every
@@ -742,6 +745,6 @@ fn tabulated_cdrf_fits_as_the_closed_form() {
         }
     }
     println!("largest difference: {:.2e} std ({})", worst.0, worst.1);
-    // Goal 0.01; measured 1.6e-4 (sigma0_b).
-    assert!(worst.0 < 5e-4, "{worst:?}");
+    // Goal 0.01; measured 3.5e-4 (sigma0_b; 1.6e-4 before the kernel's lanes).
+    assert!(worst.0 < 1e-3, "{worst:?}");
 }

@@ -181,8 +181,8 @@ fn recovers_known_parameters_from_a_bad_start() {
         );
         assert!(rel < 0.01, "param {k}: {} vs {}", got[k], want[k]);
         assert!(
-            (got[k] - want[k]).abs() < 5.0 * f.std[k] + 1e-9,
-            "param {k}: error beyond 5 std"
+            (got[k] - want[k]).abs() < 4.0 * f.std[k] + 1e-9,
+            "param {k}: error beyond 4 std"
         );
     }
     let light = f
@@ -195,7 +195,8 @@ fn recovers_known_parameters_from_a_bad_start() {
         "light error {light:.4}°, {} evaluations, {}",
         f.evaluations, f.termination
     );
-    assert!(light < 0.1, "{light}");
+    // Measured: σ0, albedo within 0.33% (2.4 std at most), light 0.0053°.
+    assert!(light < 0.02, "{light}");
     assert!((f.params.material.specular.alpha - 0.1).abs() < 0.01);
     assert_eq!(f.std[idx::ETA], 0.0);
     assert_eq!(f.correlation.nrows(), N_PARAMS - 5);

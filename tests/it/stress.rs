@@ -247,7 +247,7 @@ fn radii_from_1_to_1000_mm() {
 
 #[test]
 fn index_of_refraction_from_1_0001_to_3() {
-    // η = 1.0001 against the prior 1.45 ± 0.05: σ0 within 3% (2.3% measured), and the tension
+    // η = 1.0001 against the prior 1.45 ± 0.05: σ0 within 3% (1.83% measured), and the tension
     // is reported.
     let o = run_case(
         "eta 1.0001",
@@ -261,8 +261,8 @@ fn index_of_refraction_from_1_0001_to_3() {
     let t = config(|_| {}).material.sigma0_mm;
     assert!((0..3).all(|c| (f.sigma0_mm[c] - t[c]).abs() < 0.03 * t[c]));
     assert!(f.notes.iter().any(|n| n.contains("prior σ from the prior")));
-    // η = 3 against the default prior 1.45 ± 0.05: σ0 is right (within 3%, 1.06% measured, and
-    // within 3 of its stated std), η is not, and a note says so.
+    // η = 3 against the default prior 1.45 ± 0.05: σ0 is right (within 1.5%, 0.46% measured, and
+    // within 3 of its stated std: 0.10), η is not, and a note says so.
     let o = run_case(
         "eta 3",
         config(|c| c.material.eta = 3.0),
@@ -273,7 +273,7 @@ fn index_of_refraction_from_1_0001_to_3() {
     );
     let f = o.1.as_ref().unwrap();
     assert!(
-        (0..3).all(|c| (f.sigma0_mm[c] - t[c]).abs() < 0.03 * t[c]),
+        (0..3).all(|c| (f.sigma0_mm[c] - t[c]).abs() < 0.015 * t[c]),
         "{:?}",
         f.sigma0_mm
     );
@@ -283,7 +283,7 @@ fn index_of_refraction_from_1_0001_to_3() {
         "{:?}",
         f.notes
     );
-    // With the irradiance known η is measured (σ0 within 2.5%, 1.8% measured).
+    // With the irradiance known η is measured (σ0 within 2.5%, 1.51% measured; η 0.008 off).
     let o = run_case(
         "eta 3, irradiance",
         config(|c| c.material.eta = 3.0),
@@ -293,13 +293,15 @@ fn index_of_refraction_from_1_0001_to_3() {
         0.2,
     );
     accurate(&o, "eta 3, irradiance");
-    assert!((o.1.unwrap().eta - 3.0).abs() < 0.05);
+    let eta = o.1.unwrap().eta;
+    eprintln!("eta 3, irradiance: η {eta:.4}");
+    assert!((eta - 3.0).abs() < 0.025, "η {eta}");
 }
 
 #[test]
 fn roughness_from_0_001_to_1() {
-    // A mirror-sharp lobe is sub-pixel (no usable highlight, lobe off): σ0 within 1.5% (1.1%
-    // measured); a very rough one is absorbed by the diffuse term: within 2.5% (1.5% measured).
+    // A mirror-sharp lobe is sub-pixel (no usable highlight, lobe off): σ0 within 1.5% (0.87%
+    // measured); a very rough one is absorbed by the diffuse term: within 1% (0.33% measured).
     accurate(
         &run_case(
             "alpha 1e-3",
@@ -317,7 +319,7 @@ fn roughness_from_0_001_to_1() {
             config(|c| c.material.specular.alpha = 1.0),
             None,
             |_| {},
-            0.025,
+            0.01,
             0.3,
         ),
         "alpha 1",
@@ -330,9 +332,9 @@ fn grazing_camera_and_back_lights() {
         azimuth: az.to_radians(),
         elevation: el.to_radians(),
     };
-    // Grazing: the terminator runs through the middle of every sphere; σ0 is biased by 3.1%
+    // Grazing: the terminator runs through the middle of every sphere; σ0 is biased by 2.9%
     // (measured), which the formal standard error (0.15%) would hide: the stated one (the
-    // jackknife's, 1.5–2.6%) covers it — 1.2 std measured, 3 allowed — and σ0 within 5%.
+    // jackknife's) covers it — 2.07 std measured, 3 allowed — and σ0 within 5%.
     let o = run_case(
         "grazing light",
         config(|c| c.light = light(89.0, 0.0)),
@@ -344,7 +346,7 @@ fn grazing_camera_and_back_lights() {
     accurate(&o, "grazing light");
     let truth = config(|_| {}).material.sigma0_mm;
     assert!(sigma_error_in_std(o.1.as_ref().unwrap(), truth, "grazing light") < 3.0);
-    // Light exactly at the camera: no terminator, θ = φ everywhere (σ0 13% off measured): flagged.
+    // Light exactly at the camera: no terminator, θ = φ everywhere (σ0 24% off measured): flagged.
     let o = run_case(
         "light at the camera",
         config(|c| c.light = light(0.0, 0.0)),
@@ -358,7 +360,7 @@ fn grazing_camera_and_back_lights() {
         .notes
         .iter()
         .any(|n| n.contains("from the camera's direction")));
-    // Knowing η (the irradiance given) does not save it (12% measured): still flagged.
+    // Knowing η (the irradiance given) does not save it (37% measured): still flagged.
     let o = run_case(
         "light at the camera, irradiance",
         config(|c| c.light = light(0.0, 0.0)),

@@ -2,7 +2,7 @@
 //! the held fit by Newton steps from the fit with the light free ([`held_from_the_fit`]); the
 //! whole fit repeated only where those do not settle.
 
-use super::checks::fit_notes;
+use super::checks::{alpha_from_detector, fit_notes};
 use super::identify::{poorly_determined, prior_tension};
 use super::light::PULL_WARN;
 use super::newton;
@@ -43,12 +43,13 @@ pub(crate) fn hold_pulled_light(
     if let (LightFit::Prior, Some(pull), Some(_)) = (settings.light_fit, pulled, measured.light) {
         fit_settings.light_fit = LightFit::Hold;
         let light = LightAngles::from_direction(&measured.light.expect("matched above"));
-        let held = held_from_the_fit(&jf, light, fitted, settings.eta_prior).unwrap_or_else(|| {
-            fit_joint(
-                &Setup::new(&fit_settings, measured, ext, settings.reduction),
-                fitted,
-            )
-        });
+        let held = held_from_the_fit(&jf, light, fitted, measured, settings.eta_prior)
+            .unwrap_or_else(|| {
+                fit_joint(
+                    &Setup::new(&fit_settings, measured, ext, settings.reduction),
+                    fitted,
+                )
+            });
         let (a, b) = (jf.fit.params.to_vec(), held.fit.params.to_vec());
         light_shift = std::array::from_fn(|k| {
             if held.fit.free[k] {
@@ -105,6 +106,7 @@ fn held_from_the_fit(
     jf: &JointFit,
     light: LightAngles,
     fitted: &[&SphereData],
+    measured: &Measured,
     eta_prior: (f64, f64),
 ) -> Option<JointFit> {
     let t = std::time::Instant::now();
@@ -158,6 +160,11 @@ fn held_from_the_fit(
     let (chi2, after) = fit_notes(&fit, fitted, eta_prior, &jf.status[idx::ETA]);
     held.notes.extend(after);
     held.chi2_dof = chi2;
+    // So does α's check against the detector's (η's needs the pooled pixels: it stays).
+    let mut before = vec![];
+    alpha_from_detector(measured, jf.specular, &jf.fit, &mut before);
+    held.notes.retain(|n| !before.contains(n));
+    held.systematic[idx::ALPHA] = alpha_from_detector(measured, jf.specular, &fit, &mut held.notes);
     held.prior_tension = [1.0; N_PARAMS];
     for q in jf.problem.priors.iter().filter(|q| fit.free[q.index]) {
         held.prior_tension[q.index] =

@@ -14,7 +14,7 @@ use super::settings::{
 use super::stages::{fit_joint, JointFit};
 use crate::fit::observe::{self, SphereData};
 use crate::formats::fit::{BaselineJson, ModelChoice};
-use crate::model::{idx, N_PARAMS, PARAM_NAMES};
+use crate::model::{N_PARAMS, PARAM_NAMES};
 use std::time::Instant;
 
 /// What [`fit_session`] returns.
@@ -180,7 +180,8 @@ fn reduction_skips(jf: &JointFit) -> Vec<String> {
 
 /// Each parameter's stated standard error (docs/uncertainty.md): the larger of the formal error
 /// and the jackknife's spread, scaled by its prior's tension, with the light's systematic in
-/// quadrature (and, for η, the disagreement with the highlight alone).
+/// quadrature, and the disagreement between two measurements of it (η with the highlight alone,
+/// α with the detector's lobe fits; [`JointFit::systematic`]).
 fn stated_std(
     jf: &JointFit,
     jack: Option<&Jackknife>,
@@ -188,11 +189,8 @@ fn stated_std(
 ) -> [f64; N_PARAMS] {
     std::array::from_fn(|k| {
         let spread = jack.map_or(0.0, |j| j.std[k]);
-        let s = (jf.fit.std[k].max(spread) * jf.prior_tension[k]).hypot(light_shift[k]);
-        if k == idx::ETA {
-            s.hypot(jf.eta_systematic)
-        } else {
-            s
-        }
+        (jf.fit.std[k].max(spread) * jf.prior_tension[k])
+            .hypot(light_shift[k])
+            .hypot(jf.systematic[k])
     })
 }

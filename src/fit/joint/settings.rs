@@ -206,6 +206,8 @@ pub struct Measured {
     pub highlight_radius: Option<f64>,
     /// The detector's roughness, when it fitted a lobe.
     pub alpha: Option<f64>,
+    /// Its standard error, from the lobe fits (formal, the diffuse trend's and the clipping's).
+    pub alpha_std: Option<f64>,
     /// The photos' dark floor is unknown (lit surroundings, none in session.json) and all share
     /// one exposure: a constant per channel is fitted with the rest
     /// ([`crate::fit::solver::fit_with_floor`]; [`crate::fit::solver::Fit::floor`] holds it).

@@ -4,7 +4,7 @@
 //! not determine held ([`super::identify`]); the phases before and the checks after come from the
 //! folder's other files.
 
-use super::checks::{self, eta_from_highlight, fit_notes};
+use super::checks::{self, alpha_from_detector, eta_from_highlight, fit_notes};
 use super::identify::{
     degenerate_check, hold, parameter_set, poorly_determined, prior_tension, resolution_notes,
     Round,
@@ -69,9 +69,11 @@ pub struct JointFit {
     /// Per parameter, the scale factor its stated error takes for the disagreement between its
     /// prior and the data ([`super::identify::prior_tension`]; 1 without a prior or without disagreement).
     pub prior_tension: [f64; N_PARAMS],
-    /// The disagreement between η from the whole fit and from the highlight alone when it is
-    /// beyond their errors (0 otherwise; only with the irradiance given).
-    pub eta_systematic: f64,
+    /// Per parameter, the disagreement between two measurements of it when it is beyond their
+    /// errors (0 otherwise): η from the whole fit and from the highlight alone (only with the
+    /// irradiance given), α from the whole fit and from the detector's lobe fits. Joins the
+    /// parameter's stated error in quadrature.
+    pub systematic: [f64; N_PARAMS],
     /// χ²/dof against the measured noise: (residual / noise)² per observation row.
     pub chi2_dof: f64,
     /// The final stage's least-squares problem, for what is computed from its linearisation.
@@ -223,7 +225,9 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     for q in priors.iter().filter(|q| fit.free[q.index]) {
         tension[q.index] = prior_tension(fit.params.to_vec()[q.index], fit.std[q.index], q);
     }
-    let eta_systematic = eta_from_highlight(setup, &pooled, specular, &fit, &mut notes);
+    let mut systematic = [0.0; N_PARAMS];
+    systematic[idx::ETA] = eta_from_highlight(setup, &pooled, specular, &fit, &mut notes);
+    systematic[idx::ALPHA] = alpha_from_detector(&setup.measured, specular, &fit, &mut notes);
     laps.lap("joint stage");
     each_once(&mut notes);
     let mut jf = JointFit {
@@ -240,7 +244,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         specular,
         light_pull,
         prior_tension: tension,
-        eta_systematic,
+        systematic,
         chi2_dof: chi2,
         problem: FinalProblem {
             obs: final_obs,
