@@ -21,27 +21,27 @@ fn main() -> ExitCode {
             e.exit()
         }
         Err(e) => {
-            eprintln!("{}", cli::one_line(&e));
+            cli::say(&cli::one_line(&e));
             return ExitCode::from(2);
         }
     };
     let report = match commands::run(cli.command, cli.quiet) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            cli::say(&format!("error: {e:#}"));
             return ExitCode::FAILURE;
         }
     };
     let mut out = std::io::stdout().lock();
     if let Err(e) = write!(out, "{report}").and_then(|()| out.flush()) {
         if e.kind() != std::io::ErrorKind::BrokenPipe {
-            eprintln!("error: writing the report: {e}");
+            cli::say(&format!("error: writing the report: {e}"));
             return ExitCode::FAILURE;
         }
     }
     match report.failure() {
         Some(why) => {
-            eprintln!("error: {why}");
+            cli::say(&format!("error: {why}"));
             ExitCode::from(3)
         }
         None => ExitCode::SUCCESS,

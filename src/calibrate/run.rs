@@ -494,7 +494,7 @@ fn write_outputs(
     // trusts) last.
     let mut members: Vec<&Path> = vec![&intrinsics_file, &yaml_file, &plot_dir];
     members.extend(exports.iter().map(|(p, _, _)| p.as_path()));
-    let set = crate::formats::output::OutputSet::begin(&members);
+    let set = crate::formats::output::OutputSet::begin(&members)?;
     crate::formats::output::write_bytes(&yaml_file, detect.yaml(c)?.as_bytes())?;
     for (path, text, _) in &exports {
         crate::formats::output::write_bytes(path, text.as_bytes())?;

@@ -333,10 +333,10 @@ pub(crate) enum Synth {
 #[derive(Args, Clone, Copy)]
 pub(crate) struct LightArgs {
     /// Light azimuth in degrees (0 = from the camera, positive = from the right).
-    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 70.0, allow_hyphen_values = true, value_parser = azimuth_arg)]
     pub(crate) light_azimuth: f64,
     /// Light elevation in degrees (positive = from above).
-    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true, value_parser = elevation_arg)]
     pub(crate) light_elevation: f64,
 }
 
@@ -637,4 +637,24 @@ pub(crate) fn one_line(e: &clap::Error) -> String {
     } else {
         message.join(" ")
     }
+}
+
+/// The longest line [`say`] prints whole (characters): a message quoting a huge field keeps its
+/// start and its end.
+const SAY_MAX: usize = 2000;
+
+/// Print one line on stderr. A stderr that cannot be written (`2>/dev/full`, closed) is ignored:
+/// the exit status still says what happened (eprintln! would panic, exit 101).
+pub(crate) fn say(line: &str) {
+    let n = line.chars().count();
+    let line = if n > SAY_MAX {
+        let head: String = line.chars().take(SAY_MAX / 2).collect();
+        let tail: String = line.chars().skip(n - SAY_MAX / 2).collect();
+        format!("{head} … ({} characters left out) … {tail}", n - SAY_MAX)
+    } else {
+        line.to_string()
+    };
+    let mut err = std::io::stderr().lock();
+    let _ = std::io::Write::write_all(&mut err, format!("{line}\n").as_bytes())
+        .and_then(|()| std::io::Write::flush(&mut err));
 }

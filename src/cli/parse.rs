@@ -13,7 +13,46 @@ pub(crate) fn angles(s: &str) -> std::result::Result<[f64; 2], String> {
             .filter(|v| v.is_finite())
             .ok_or_else(|| format!("not a finite number: {t:?}"))
     };
-    Ok([p(a)?, p(b)?])
+    let (az, el) = (p(a)?, p(b)?);
+    Ok([azimuth(az)?, elevation(el)?])
+}
+
+/// An azimuth in degrees: finite, within one turn either way.
+pub(crate) fn azimuth(v: f64) -> std::result::Result<f64, String> {
+    if (-360.0..=360.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "an azimuth must lie in [-360, 360] degrees, got {v}"
+        ))
+    }
+}
+
+/// An elevation in degrees: within [−90, 90].
+pub(crate) fn elevation(v: f64) -> std::result::Result<f64, String> {
+    if (-90.0..=90.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "an elevation must lie in [-90, 90] degrees, got {v}"
+        ))
+    }
+}
+
+/// [`azimuth`] from text.
+pub(crate) fn azimuth_arg(s: &str) -> std::result::Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .map_err(|e| format!("{s:?}: {e}"))
+        .and_then(azimuth)
+}
+
+/// [`elevation`] from text.
+pub(crate) fn elevation_arg(s: &str) -> std::result::Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .map_err(|e| format!("{s:?}: {e}"))
+        .and_then(elevation)
 }
 
 /// "AxB" as two numbers (`what` names them in the error).

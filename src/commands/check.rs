@@ -4,10 +4,16 @@ use super::Report;
 use anyhow::Result;
 use std::fmt;
 use std::path::PathBuf;
-use workbench::formats::session::{inspect, SessionReport};
+use workbench::formats::session::{inspect, Session, SessionReport};
 
+/// The session's files checked as the other commands read them: session.json, the intrinsics,
+/// each photo's header and EXIF, and then every photo decoded in full (a file cut short is found
+/// here, not by `detect`).
 pub(crate) fn check(session: PathBuf) -> Result<Checked> {
-    Ok(Checked(inspect(&session)?))
+    let report = inspect(&session)?;
+    let (sess, _) = Session::load(&session)?;
+    report.decode(&sess)?;
+    Ok(Checked(report))
 }
 
 /// What the session holds, as checked.

@@ -735,7 +735,7 @@ pub fn run_decoded(
     let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
     // One set: the overlays, then detections.json (what the reuse check trusts) last.
     let overlay_dir = out_dir.join("overlays");
-    let set = crate::formats::output::OutputSet::begin(&[&out, &overlay_dir]);
+    let set = crate::formats::output::OutputSet::begin(&[&out, &overlay_dir])?;
     // Photos in parallel: each one's samples and overlay (a PNG to encode) are its own.
     let images: Vec<ImageDetection> = per_image
         .par_iter()

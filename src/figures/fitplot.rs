@@ -719,27 +719,52 @@ fn groups<'a>(fit: &FitFile, spheres: &'a [SphereData]) -> Vec<Group<'a>> {
         .collect()
 }
 
+/// The residual image's name of the `index`-th sphere of photo `image`: `residual-<stem>-<n>`,
+/// the stem's characters other than letters, digits, `-` and `_` replaced by `_`.
+fn residual_name(image: &str, index: usize) -> String {
+    let stem: String = Path::new(image)
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default()
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("residual-{stem}-{}", index + 1)
+}
+
+/// The names (without extension) of every figure [`write_all`] may draw for `fit`: what another
+/// reader of the plots folder (the browser page) takes from it, and nothing else.
+pub(crate) fn figure_names(fit: &FitFile) -> Vec<String> {
+    let fixed = [
+        "radiance-theta",
+        "residual-theta",
+        "residual-phi",
+        "correlation",
+        "holdout",
+    ];
+    let mut names: Vec<String> = fixed.iter().map(|n| n.to_string()).collect();
+    names.extend(
+        fit.rmse
+            .spheres
+            .iter()
+            .map(|s| residual_name(&s.image, s.index)),
+    );
+    names
+}
+
 /// The residual image of each sphere of a group.
 fn residual_images(g: &Group) -> Vec<Named> {
     let mut out = vec![];
     for e in &g.spheres {
         if let Some(f) = residual_image(g, e) {
-            let stem = Path::new(&e.sphere.image)
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_default();
-            let stem: String = stem
-                .chars()
-                .map(|c| {
-                    if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                        c
-                    } else {
-                        '_'
-                    }
-                })
-                .collect();
             out.push(Named {
-                name: format!("residual-{stem}-{}", e.sphere.index + 1),
+                name: residual_name(&e.sphere.image, e.sphere.index),
                 caption: format!(
                     "{}, sphere {} (r = {} mm): the photo and data − model per pixel block.",
                     e.sphere.image,

@@ -182,6 +182,7 @@ impl ExifInfo {
     /// Read the EXIF of a JPEG, TIFF or PNG file; `None` when it has none. A damaged block is read
     /// as far as it parses, with a note for what was skipped.
     pub fn read(path: &Path) -> Result<Option<ExifInfo>> {
+        crate::formats::input::regular_file(path)?;
         let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
         let mut r = std::io::BufReader::new(file);
         let (ex, errors) = match exif::Reader::new()

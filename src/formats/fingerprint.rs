@@ -17,6 +17,7 @@ pub type Inputs = BTreeMap<String, String>;
 /// its fixed keys (SipHash-1-3 today): not a cryptographic digest, a change detector; a Rust
 /// release that changed it would only make the next run redo its work.
 pub fn of_file(path: &Path) -> Result<String> {
+    crate::formats::input::regular_file(path)?;
     let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut h = std::hash::DefaultHasher::new();
     let mut buf = vec![0u8; 1 << 20];

@@ -55,15 +55,17 @@ pub struct OutputSet {
 
 impl OutputSet {
     /// Open a set covering `roots`: output files, and folders whose files (at any depth) belong
-    /// to it.
-    pub fn begin(roots: &[&Path]) -> OutputSet {
+    /// to it. Each root must be missing, a regular file or a folder ([`replaceable`]): a special
+    /// file or a link to a file is refused before anything is written.
+    pub fn begin(roots: &[&Path]) -> Result<OutputSet> {
+        check_roots(roots)?;
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
         open_sets().push(Open {
             id,
             roots: roots.iter().map(|r| absolute(r)).collect(),
             pending: vec![],
         });
-        OutputSet { id }
+        Ok(OutputSet { id })
     }
 
     fn take(&self) -> Option<Open> {
@@ -123,6 +125,34 @@ fn sync_dir(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Refuse, before any work, outputs that [`OutputSet::begin`] would refuse at the end: each root
+/// missing, a regular file, or a folder (or a link to one).
+pub fn check_roots(roots: &[&Path]) -> Result<()> {
+    roots.iter().try_for_each(|r| replaceable(r, true))
+}
+
+/// Whether an output may go to `path`: nothing there, or a regular file (replaced by the rename),
+/// or — where `folder_ok`, for a set's roots — a folder or a link to one (written into). Anything
+/// else is refused in one line: the rename would replace a FIFO, a device such as /dev/null or
+/// /dev/stdout, or a symbolic link, with a regular file.
+fn replaceable(path: &Path, folder_ok: bool) -> Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    let kind = meta.file_type();
+    if kind.is_file() || (folder_ok && std::fs::metadata(path).is_ok_and(|m| m.is_dir())) {
+        return Ok(());
+    }
+    let what = if kind.is_symlink() {
+        "a symbolic link: give the path it points to"
+    } else if kind.is_dir() {
+        "a folder, where a file is written"
+    } else {
+        "not a regular file (a device, FIFO or socket): outputs replace only regular files"
+    };
+    Err(Error::invalid(path, format!("the output path is {what}")))
+}
+
 /// Files written so far by this process, for the test hook below.
 static WRITTEN: AtomicUsize = AtomicUsize::new(0);
 
@@ -144,6 +174,7 @@ pub(crate) fn write_atomic<F>(path: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&mut std::io::BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
 {
+    replaceable(path, false)?;
     let dir = parent(path);
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut tmp = tempfile::Builder::new()
@@ -202,6 +233,7 @@ pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
 
 /// Read and parse a JSON file.
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    crate::formats::input::regular_file(path)?;
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     serde_json::from_str(&text).map_err(|e| Error::Json {
         path: path.to_path_buf(),

@@ -214,24 +214,30 @@ pub(crate) const MIN_SIDE: u32 = 32;
 
 /// Refuse images too large to decode or too small to hold a sphere.
 pub(crate) fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
+    match size_problem(width, height) {
+        Some(why) => Err(Error::invalid(path, why)),
+        None => Ok(()),
+    }
+}
+
+/// What is wrong with an image of `width`×`height` for workbench's readers, if anything: the
+/// bounds every photo read must meet, and every photo `synth` writes (so that what one command
+/// makes, the next can read).
+pub(crate) fn size_problem(width: u32, height: u32) -> Option<String> {
     let n = width as u64 * height as u64;
     if n > MAX_PIXELS {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "image is {width}×{height} ({:.1} MP), more than the {} MP workbench reads: downsample it",
-                n as f64 / 1e6,
-                MAX_PIXELS / 1_000_000
-            ),
+        return Some(format!(
+            "image is {width}×{height} ({:.1} MP), more than the {} MP workbench reads: downsample it",
+            n as f64 / 1e6,
+            MAX_PIXELS / 1_000_000
         ));
     }
     if width < MIN_SIDE || height < MIN_SIDE {
-        return Err(Error::invalid(
-            path,
-            format!("image is {width}×{height}: too small to hold a sphere (at least {MIN_SIDE}×{MIN_SIDE})"),
+        return Some(format!(
+            "image is {width}×{height}: too small to hold a sphere (at least {MIN_SIDE}×{MIN_SIDE})"
         ));
     }
-    Ok(())
+    None
 }
 
 /// A JPEG cut short decodes without complaint (the missing rows grey): refuse one whose last scan
@@ -251,6 +257,7 @@ fn check_jpeg_end(path: &Path, b: &[u8]) -> Result<()> {
 fn decode_oriented(path: &Path) -> Result<image::DynamicImage> {
     use image::ImageDecoder;
     // Read once: the JPEG end check and the decoder share the bytes.
+    crate::formats::input::regular_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
         .with_guessed_format()

@@ -144,6 +144,15 @@ impl Session {
                     }
                 }
             }
+            if let Some(j) = self.images[..i]
+                .iter()
+                .position(|o| same_file(&o.file, &im.file))
+            {
+                return bad(format!(
+                    "images[{i}] ({}) is images[{j}] again: a photo listed twice would be fitted twice and shrink every error",
+                    im.file
+                ));
+            }
             let hinted = im.spheres.iter().filter(|s| s.center_px.is_some()).count();
             if hinted != 0 && hinted != im.spheres.len() {
                 return bad(format!(
@@ -173,6 +182,17 @@ impl Session {
             session_file.parent().unwrap_or(Path::new(".")).join(p)
         }
     }
+}
+
+/// Whether two photo paths of session.json name the same file, `./` components aside.
+fn same_file(a: &str, b: &str) -> bool {
+    let norm = |p: &str| -> PathBuf {
+        Path::new(p)
+            .components()
+            .filter(|c| !matches!(c, std::path::Component::CurDir))
+            .collect()
+    };
+    norm(a) == norm(b)
 }
 
 /// Whether a path written in session.json stays inside the session folder: relative, and never
@@ -336,6 +356,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
     let mut exifs = Vec::new();
     for im in &s.images {
         let p = Session::resolve(&file, &im.file);
+        crate::formats::input::regular_file(&p)?;
         let reader = image::ImageReader::open(&p)
             .map_err(|e| Error::io(&p, e))?
             .with_guessed_format()

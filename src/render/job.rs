@@ -36,12 +36,17 @@ pub struct Table {
     pub seconds: f64,
 }
 
+/// The largest κ_max accepted (1/mm): a radius of a micrometre, far past any mesh's detail and
+/// where every blur is already the flat limit; beyond it the blur σ0·κ overflows (a table of
+/// `inf`, issue 33).
+const KAPPA_MAX_LIMIT: f64 = 1e3;
+
 /// κ_max (1/mm): the one given, checked, or 3 / the smallest radius fitted.
 fn kappa_max_of(fm: &FitMaterial, given: Option<f64>) -> Result<f64> {
     let kmax = given.unwrap_or_else(|| fm.kappa_max());
-    if !(kmax > 0.0) || !kmax.is_finite() {
+    if !(kmax > 0.0 && kmax <= KAPPA_MAX_LIMIT) {
         return Err(Error::Argument(format!(
-            "--kappa-max must be > 0, got {kmax}"
+            "--kappa-max must lie in (0, {KAPPA_MAX_LIMIT}] 1/mm, got {kmax}"
         )));
     }
     Ok(kmax)
@@ -72,6 +77,14 @@ fn sized<T>(
                 )));
             }
             let (t, e, tried) = lut::choose(tol, build);
+            if e.max_rel > tol {
+                // Not met even by the largest size: said, not recorded as met.
+                let ((n, m), _) = tried[tried.len() - 1];
+                return Err(Error::Argument(format!(
+                    "--tolerance {tol:e}: the largest table, {n}x{m}, is {:.2e} of the peak off: give a tolerance of at least that",
+                    e.max_rel
+                )));
+            }
             Ok((t, e, tried, Some(tol)))
         }
     }
@@ -254,9 +267,12 @@ pub fn prepare(path: &Path, unit: Unit, object_size_mm: Option<f64>) -> Result<P
     let t0 = Instant::now();
     let mut mesh = Mesh::load(path, unit)?;
     if let Some(d) = object_size_mm {
-        if !(d > 0.0) || !d.is_finite() {
+        // A micrometre to a kilometre: beyond, the camera's framing and the curvature leave
+        // the range of f64 arithmetic that the rasterizer and the table keep finite (black
+        // images, issue 33).
+        if !(1e-3..=1e6).contains(&d) {
             return Err(Error::Argument(format!(
-                "--object-size must be > 0 mm, got {d}"
+                "--object-size must lie in [0.001, 1000000] mm, got {d}"
             )));
         }
         let (c, r) = mesh.bounds();
@@ -409,7 +425,7 @@ pub fn check(fit_path: &Path, dir: &Path, table_size: TableSize) -> Result<Vec<S
     let results = check::check_fit(&fit, fit_path, &fm, &t.lut)?;
     let exposure = default_exposure(t.lut.sample(1.0, 0.0).map(f64::from), fm.material.eta);
     // One set: the pictures, then sphere-check.json last.
-    let set = crate::formats::output::OutputSet::begin(&[dir]);
+    let set = crate::formats::output::OutputSet::begin(&[dir])?;
     let mut out = Vec::new();
     for (cmp, rendered, predicted) in results {
         let strip = side_by_side(&rendered, &predicted, 10.0);

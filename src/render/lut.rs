@@ -353,7 +353,7 @@ pub fn write(
     let paths = output_paths(out);
     let [png, exr, json] = &paths;
     // One set: the PNG and the EXR, then the sidecar that describes them last.
-    let set = crate::formats::output::OutputSet::begin(&[png, exr, json]);
+    let set = crate::formats::output::OutputSet::begin(&[png, exr, json])?;
     let scale = lut.peak().max(f64::MIN_POSITIVE);
     write_png16_rgb(
         png,

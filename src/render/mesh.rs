@@ -120,6 +120,7 @@ impl Mesh {
 
     /// Load an OBJ or PLY file (by extension), scaling coordinates by `unit`.
     pub fn load(path: &Path, unit: Unit) -> Result<Mesh> {
+        crate::formats::input::regular_file(path)?;
         let ext = path
             .extension()
             .and_then(|e| e.to_str())

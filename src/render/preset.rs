@@ -448,7 +448,7 @@ pub fn write(req: &WriteRequest, t: &EngineTable) -> Result<(Vec<PathBuf>, Engin
     if req.mesh.is_some() {
         members.push(&glb);
     }
-    let set = OutputSet::begin(&members);
+    let set = OutputSet::begin(&members)?;
     let colour_space = write_image(req, t, &image)?;
     let sidecar = sidecar(req, t, &image, colour_space, &shaders, &glb)?;
     for (path, text) in &shaders {

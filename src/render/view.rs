@@ -101,6 +101,7 @@ pub struct ViewOptions<'a> {
 
 /// Write the page into `out` (created; its files replaced), as one set.
 pub fn write(o: ViewOptions) -> Result<ViewReport> {
+    crate::formats::input::regular_file(o.fit)?;
     let fit_text = std::fs::read_to_string(o.fit).map_err(|e| Error::io(o.fit, e))?;
     let (fit, fm) = read_fit(o.fit)?;
     // The table of the generic preset, as `lut --preset generic` chooses it.
@@ -129,15 +130,16 @@ pub fn write(o: ViewOptions) -> Result<ViewReport> {
     };
     // The exposure `workbench render` picks, from this table.
     let exposure = crate::render::job::default_exposure(stored.lookup(1.0, 0.0), fm.material.eta);
-    // The fit's figures, copied beside the page.
+    // The fit's figures, copied beside the page: those `solve --plots` draws for this fit, as
+    // regular files (not whatever else the folder holds, nor a link to elsewhere).
     let plots = o.fit.parent().unwrap_or(Path::new(".")).join("plots");
     let mut figures: Vec<(PathBuf, String)> = vec![];
-    if let Ok(rd) = std::fs::read_dir(&plots) {
-        for e in rd.flatten() {
-            let p = e.path();
-            if matches!(p.extension().and_then(|x| x.to_str()), Some("png" | "svg")) {
-                let name = format!("figures/{}", e.file_name().to_string_lossy());
-                figures.push((p, name));
+    for stem in crate::figures::fitplot::figure_names(&fit) {
+        for ext in ["png", "svg"] {
+            let file = format!("{stem}.{ext}");
+            let p = plots.join(&file);
+            if std::fs::symlink_metadata(&p).is_ok_and(|m| m.is_file()) {
+                figures.push((p, format!("figures/{file}")));
             }
         }
     }
@@ -175,7 +177,7 @@ pub fn write(o: ViewOptions) -> Result<ViewReport> {
     let js = o.out.join("viewer.js");
     let data_js = o.out.join("data.js");
     let fig_dir = o.out.join("figures");
-    let set = OutputSet::begin(&[&index, &js, &data_js, &fig_dir]);
+    let set = OutputSet::begin(&[&index, &js, &data_js, &fig_dir])?;
     let mut files = vec![];
     for (src, name) in &figures {
         let bytes = std::fs::read(src).map_err(|e| Error::io(src, e))?;

@@ -34,7 +34,21 @@ pub use summary::summary;
 /// Run `solve` and write fit.json (or reuse the one an identical earlier run wrote).
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
+    let outputs: Vec<&Path> = opts
+        .out
+        .iter()
+        .chain(&opts.plots)
+        .map(|p| p.as_path())
+        .collect();
+    crate::formats::output::check_roots(&outputs)?;
     let report = session::inspect(&opts.session)?;
+    if report.session_file.to_str().is_none() {
+        // fit.json names its session as text: a lossy name would point nowhere for `plot`.
+        return Err(crate::error::Error::invalid(
+            &report.session_file,
+            "the session's path is not valid UTF-8, which fit.json cannot record: rename the folder",
+        ));
+    }
     let now = crate::formats::fingerprint::of_files(&report.input_files())?;
     if let Some((mut f, out)) = cached(opts, &report, &now) {
         f.skipped.insert(
@@ -99,7 +113,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     // One set: the figures, then fit.json (what the reuse check trusts) last.
     let mut roots: Vec<&Path> = vec![&out];
     roots.extend(opts.plots.as_deref());
-    let set = crate::formats::output::OutputSet::begin(&roots);
+    let set = crate::formats::output::OutputSet::begin(&roots)?;
     if let Some(dir) = &opts.plots {
         crate::figures::fitplot::write_all(&fit, &out, &l.spheres, dir)?;
     }

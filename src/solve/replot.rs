@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 /// solving. The session is the one fit.json names (or session.json beside fit.json when that
 /// has moved); detections are reused when up to date.
 pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
+    crate::formats::output::check_roots(&[dir])?;
     let fit: FitFile = crate::formats::output::read_json(fit_path)?;
     fit.validate(fit_path)?;
     let session = fit.session_path(fit_path)?;
@@ -28,7 +29,7 @@ pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> 
             ),
         ));
     }
-    let set = crate::formats::output::OutputSet::begin(&[dir]);
+    let set = crate::formats::output::OutputSet::begin(&[dir])?;
     let files = crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)?;
     set.commit()?;
     Ok(files)

@@ -153,6 +153,10 @@ fn check(cfg: &CheckerConfig) -> Result<()> {
     if cfg.views == 0 || cfg.views > 200 {
         return arg("views must be between 1 and 200");
     }
+    let size = cfg.camera.image_size;
+    if let Some(why) = photo::size_problem(size[0], size[1]) {
+        return Err(Error::Argument(why));
+    }
     if cfg.supersample == 0 || cfg.supersample > 16 {
         return arg("supersample must be between 1 and 16");
     }
@@ -323,6 +327,8 @@ pub struct CheckerOutput {
 pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerOutput> {
     let poses = poses(cfg)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    // One set: the views with their truth.json, or the folder as it was.
+    let set = crate::formats::output::OutputSet::begin(&[out])?;
     let cam = &cfg.camera;
     let (w, h) = (cam.width() as usize, cam.height() as usize);
     let rays: Vec<Option<Vector3<f64>>> = (0..w * h)
@@ -411,6 +417,7 @@ pub fn generate(cfg: &CheckerConfig, out: &Path, quiet: bool) -> Result<CheckerO
     };
     let truth_file = out.join("truth.json");
     write_json(&truth_file, &truth)?;
+    set.commit()?;
     Ok(CheckerOutput {
         truth_file,
         images,

@@ -266,6 +266,9 @@ fn check(cfg: &SessionConfig) -> Result<()> {
     if !(c.fx > 0.0 && c.fy > 0.0) || c.image_size.contains(&0) {
         return arg("camera: focal lengths and image size must be positive".into());
     }
+    if let Some(why) = photo::size_problem(c.image_size[0], c.image_size[1]) {
+        return arg(why);
+    }
     Ok(())
 }
 
@@ -590,6 +593,9 @@ pub fn generate(
 ) -> Result<SessionOutput> {
     let plans = plan(cfg)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    // The photos, session.json and truth.json are one set: a run cut short leaves the folder's
+    // previous session whole, never new photos beside an old truth.
+    let set = crate::formats::output::OutputSet::begin(&[out])?;
     let cam = &cfg.camera;
     let (w, h) = (cam.width() as usize, cam.height() as usize);
     let pb = crate::progress::bar(plans.len() as u64, "rendering", quiet);
@@ -651,6 +657,7 @@ pub fn generate(
     let truth_file = out.join("truth.json");
     write_json(&session_file, &session)?;
     write_json(&truth_file, &truth)?;
+    set.commit()?;
     Ok(SessionOutput {
         session_file,
         truth_file,

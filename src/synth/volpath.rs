@@ -372,6 +372,10 @@ fn check(cfg: &PbrConfig) -> Result<()> {
     if cfg.spp < 2 {
         return bad("spp must be at least 2 (two half renders)");
     }
+    let size = cfg.camera.image_size;
+    if let Some(why) = photo::size_problem(size[0], size[1]) {
+        return Err(Error::Argument(why));
+    }
     let r_max = cfg.radii_mm.iter().cloned().fold(0.0, f64::max);
     if !(cfg.distance_mm > 1.5 * r_max) {
         return bad("the distance must exceed 1.5 × the largest radius");
@@ -444,6 +448,8 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
     let renders = render_all(cfg, centre, quiet);
     let scale = exposure_scale(&renders)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    // One set: the photos with their session.json and truth.json, or the folder as it was.
+    let set = crate::formats::output::OutputSet::begin(&[out])?;
     let mut images = Vec::new();
     let mut photos = Vec::new();
     for (r, img, mean, secs) in &renders {
@@ -474,6 +480,7 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
     write_json(&out.join("session.json"), &session)?;
     let truth = pbr_truth(cfg, scale, photos);
     write_json(&out.join("truth.json"), &truth)?;
+    set.commit()?;
     Ok(PbrOutput { images, truth })
 }
 

@@ -86,6 +86,7 @@ fn broken_image_files() {
     let bytes = std::fs::read(&p).unwrap();
     std::fs::write(&p, &bytes[..3000]).unwrap();
     refused("solve", &d, "r20.png");
+    refused("check", &d, "r20.png");
     let d = session_in(tmp.path(), "garbage-png", Format::Png16);
     let p = photo(&d);
     std::fs::write(
@@ -104,6 +105,7 @@ fn broken_image_files() {
     std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
     let e = refused("solve", &d, "r20.jpg");
     assert!(e.contains("truncated JPEG"), "{e}");
+    refused("check", &d, "r20.jpg");
     let d = session_in(tmp.path(), "bad-exif", Format::Jpeg);
     let p = photo(&d);
     let mut bytes = std::fs::read(&p).unwrap();
@@ -268,12 +270,171 @@ fn bad_session_json() {
             Box::new(|s: String| s.replace("\"r20.png\"", "\"/etc/r20.png\"")),
             "outside the session folder",
         ),
+        (
+            "twice",
+            Box::new(|s: String| {
+                let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+                let mut again = v["images"][0].clone();
+                again["file"] = "./r20.png".into();
+                let mut v = v;
+                v["images"].as_array_mut().unwrap().push(again);
+                v.to_string()
+            }),
+            "images[1] (./r20.png) is images[0] again",
+        ),
+        (
+            "huge-field",
+            Box::new(|s: String| {
+                s.replacen(
+                    "\"schema\"",
+                    &format!("\"{}\": 1, \"schema\"", "x".repeat(10_000_000)),
+                    1,
+                )
+            }),
+            "characters left out",
+        ),
     ] {
         let d = session_in(tmp.path(), name, Format::Png16);
         edit_session(&d, edit);
         let e = refused("solve", &d, "session.json");
         assert!(e.contains(needle), "{name}: {e}");
+        // One line, however long the field it quotes.
+        assert!(e.len() < 5000, "{name}: {} bytes on stderr", e.len());
     }
+}
+
+/// Outputs replace only regular files (issue 33): `--out` naming a FIFO, a symbolic link or a
+/// folder is refused in one line before anything is written, and the special file is left as it
+/// was, with no temporary beside it. Made in a temporary folder, never the system's /dev.
+#[cfg(unix)]
+#[test]
+fn outputs_never_replace_special_files() {
+    use std::os::unix::fs::FileTypeExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let fit = d.join("fit.json");
+    let out = tmp.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let fifo = out.join("fifo.json");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    let target = out.join("target.json");
+    std::fs::write(&target, "keep").unwrap();
+    let link = out.join("link.json");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let folder = out.join("folder.json");
+    std::fs::create_dir(&folder).unwrap();
+    let fifo_made = made.is_ok_and(|s| s.success());
+    if !fifo_made {
+        common::skipped("hostile::outputs_never_replace_special_files: the FIFO case: no mkfifo");
+    }
+    // The table's stem `t` writes t.png, t.exr and t.json: t.json is a link here.
+    let lut_json = out.join("t.json");
+    std::os::unix::fs::symlink(&target, &lut_json).unwrap();
+    let (dir, fit, stem) = (d.to_str().unwrap(), fit.to_str().unwrap(), out.join("t"));
+    let (link_s, folder_s, fifo_s) = (
+        link.to_str().unwrap(),
+        folder.to_str().unwrap(),
+        fifo.to_str().unwrap(),
+    );
+    let mut cases = vec![
+        (vec!["solve", dir, "--out", link_s], "symbolic link"),
+        (vec!["solve", dir, "--out", folder_s], "a folder"),
+        (vec!["plot", fit, "--out", link_s], "symbolic link"),
+        (
+            vec!["lut", fit, "--out", stem.to_str().unwrap()],
+            "symbolic link",
+        ),
+    ];
+    if fifo_made {
+        cases.push((vec!["solve", dir, "--out", fifo_s], "not a regular file"));
+        cases.push((vec!["plot", fit, "--out", fifo_s], "not a regular file"));
+    }
+    for (args, needle) in cases {
+        let (code, err) = wb(&args);
+        assert_ne!(code, 0, "{args:?}: exit 0");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+        println!("{}: {}", args[0], err.trim());
+    }
+    assert!(!out.join("t.png").exists() && !out.join("t.exr").exists());
+    let meta = |p: &Path| std::fs::symlink_metadata(p).unwrap().file_type();
+    if fifo.exists() {
+        assert!(meta(&fifo).is_fifo(), "the FIFO was replaced");
+    }
+    assert!(meta(&link).is_symlink(), "the link was replaced");
+    assert!(
+        meta(&lut_json).is_symlink(),
+        "the table's link was replaced"
+    );
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "keep");
+    assert!(meta(&folder).is_dir());
+    let left: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".workbench-"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+/// A stderr that cannot be written (`2>/dev/full`) does not turn an error into a panic: the exit
+/// status is still the command's (1), not 101. /dev/full is only written to, never replaced.
+#[cfg(unix)]
+#[test]
+fn an_unwritable_stderr_keeps_the_exit_status() {
+    let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+        common::skipped("hostile::an_unwritable_stderr_keeps_the_exit_status: no /dev/full");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .args([
+            "--quiet",
+            "solve",
+            tmp.path().join("none").to_str().unwrap(),
+        ])
+        .stderr(full)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(1));
+}
+
+/// Angles out of range are refused when parsed: an elevation beyond ±90° or an azimuth beyond a
+/// turn, for the solve's start light and the synthetic session's light.
+#[test]
+fn light_angles_out_of_range() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    for (args, needle) in [
+        (
+            vec!["solve", d.to_str().unwrap(), "--start-light", "0,1000"],
+            "elevation must lie",
+        ),
+        (
+            vec!["solve", d.to_str().unwrap(), "--start-light", "-400,10"],
+            "azimuth must lie",
+        ),
+        (
+            vec![
+                "synth",
+                "session",
+                "--out",
+                tmp.path().join("x").to_str().unwrap(),
+                "--light-elevation",
+                "91",
+            ],
+            "elevation must lie",
+        ),
+    ] {
+        let (code, err) = wb(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(
+            err.contains(needle) && err.lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!d.join("fit.json").exists() && !tmp.path().join("x").exists());
 }
 
 #[cfg(unix)]
@@ -338,4 +499,196 @@ fn sizes_out_of_bounds() {
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
+
+/// Run the binary with a deadline: its exit code and stderr, or a failure naming the command when
+/// it is still running after `secs` (killed first, so that a hang fails the test, not the suite).
+fn wb_within(secs: u64, args: &[&str]) -> (i32, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .arg("--quiet")
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+            return (status.code().unwrap_or(-1), err);
+        }
+        if t.elapsed().as_secs() >= secs {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?}: still running after {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// A FIFO where a photo or a mesh is read is refused in one line, not waited on forever
+/// (issue 33: `check` and `render` hung), and so is a folder.
+#[cfg(unix)]
+#[test]
+fn special_files_as_inputs_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let solved = session_in(tmp.path(), "solved", Format::Png16);
+    let (code, err) = wb(&["solve", solved.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let fit = solved.join("fit.json");
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let p = photo(&d);
+    std::fs::remove_file(&p).unwrap();
+    if !Command::new("mkfifo")
+        .arg(&p)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        common::skipped("hostile::special_files_as_inputs_are_refused: no mkfifo");
+        return;
+    }
+    let mesh = tmp.path().join("fifo.obj");
+    Command::new("mkfifo").arg(&mesh).status().unwrap();
+    let folder_mesh = tmp.path().join("folder.obj");
+    std::fs::create_dir(&folder_mesh).unwrap();
+    let out = tmp.path().join("r.png");
+    let (ds, ms, fs, os, fit) = (
+        d.to_str().unwrap(),
+        mesh.to_str().unwrap(),
+        folder_mesh.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fit.to_str().unwrap(),
+    );
+    for (args, needle) in [
+        (vec!["check", ds], "not a regular file"),
+        (vec!["solve", ds], "not a regular file"),
+        (
+            vec!["render", ms, "--fit", fit, "--out", os],
+            "not a regular file",
+        ),
+        (vec!["render", fs, "--fit", fit, "--out", os], "is a folder"),
+    ] {
+        let (code, err) = wb_within(30, &args);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(
+            err.contains(needle) && err.lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!out.exists());
+}
+
+/// `synth` writes only photos the readers accept (issue 33: a 20000×20000 session aborted on a
+/// 9.6 GB allocation, beyond the 64 MP any command reads): refused in one line, nothing written.
+#[test]
+fn synthetic_photos_larger_than_what_is_read_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    for kind in ["session", "pbr", "checkerboard"] {
+        let out = tmp.path().join(kind);
+        let (code, err) = wb_within(
+            30,
+            &[
+                "synth",
+                kind,
+                "--out",
+                out.to_str().unwrap(),
+                "--size",
+                "20000x20000",
+            ],
+        );
+        assert_ne!(code, 0, "{kind}");
+        assert!(
+            err.contains("more than the 64 MP") && err.lines().count() == 1,
+            "{kind}: {err}"
+        );
+        assert!(
+            !out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(),
+            "{kind}"
+        );
+    }
+}
+
+/// A session folder whose name is not UTF-8 is refused by `solve` in one line (issue 33: fit.json
+/// stored the name lossily, and `plot` then said the session was gone).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_session_path_that_is_not_utf8_is_refused() {
+    use std::os::unix::ffi::OsStrExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let name = std::ffi::OsStr::from_bytes(b"caf\xe9");
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let odd = tmp.path().join(name);
+    std::fs::rename(&d, &odd).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_workbench"))
+        .args(["--quiet", "solve"])
+        .arg(&odd)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("not valid UTF-8") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!odd.join("fit.json").exists());
+}
+
+/// Table and render options whose result would be `inf` or black are refused in one line, and a
+/// tolerance no table size meets is said, not recorded as met (issue 33).
+#[test]
+fn table_and_render_options_out_of_range() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let fit = d.join("fit.json");
+    let (fit, stem) = (fit.to_str().unwrap(), tmp.path().join("t"));
+    let stem = stem.to_str().unwrap();
+    let obj = crate::view::torus_obj(tmp.path());
+    let out = tmp.path().join("r.png");
+    for (args, needle) in [
+        (
+            vec!["lut", fit, "--out", stem, "--kappa-max", "1e300"],
+            "--kappa-max must lie",
+        ),
+        (
+            vec!["lut", fit, "--out", stem, "--tolerance", "1e-7"],
+            "the largest table",
+        ),
+        (
+            vec![
+                "render",
+                obj.to_str().unwrap(),
+                "--fit",
+                fit,
+                "--out",
+                out.to_str().unwrap(),
+                "--object-size",
+                "1e300",
+            ],
+            "--object-size must lie",
+        ),
+        (
+            vec![
+                "render",
+                obj.to_str().unwrap(),
+                "--fit",
+                fit,
+                "--out",
+                out.to_str().unwrap(),
+                "--object-size",
+                "1e-300",
+            ],
+            "--object-size must lie",
+        ),
+    ] {
+        let (code, err) = wb_within(120, &args);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(
+            err.contains(needle) && err.lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!out.exists() && !tmp.path().join("t.json").exists());
 }

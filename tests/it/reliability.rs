@@ -132,6 +132,39 @@ fn solve_killed_anywhere_keeps_the_previous_set() {
     );
 }
 
+/// synth session into a folder that holds an earlier session: the photos, session.json and
+/// truth.json are one set (issue 33: a run cut short left new photos beside the old truth).
+#[test]
+fn synth_killed_anywhere_keeps_the_previous_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = row_session(tmp.path(), "s", "1");
+    let kills = kill_everywhere(
+        &s,
+        &[
+            "--quiet",
+            "synth",
+            "session",
+            "--out",
+            s.to_str().unwrap(),
+            "--size",
+            "480x320",
+            "--fx",
+            "520",
+            "--radii",
+            "20,15,12",
+            "--layout",
+            "row",
+            "--seed",
+            "2",
+            "--light-azimuth",
+            "40",
+        ],
+        "truth.json",
+    );
+    // The photo, the intrinsics, session.json and truth.json: four files, three kills at least.
+    assert!(kills >= 2, "only {kills} kills");
+}
+
 /// calibrate: intrinsics.json, the OpenCV YAML and the plots.
 #[cfg(feature = "opencv")]
 #[test]

@@ -174,3 +174,34 @@ fn a_broken_fit_shows_an_error_on_the_page() {
     );
     assert!(!empty.join("index.html").exists());
 }
+
+/// The page copies the fit's own figures from plots/ beside fit.json, as regular files, and
+/// nothing else the folder holds (issue 33: calibration plots, and a link to a system file
+/// copied in as a .png).
+#[cfg(unix)]
+#[test]
+fn the_page_copies_only_the_fits_figures() {
+    let (dir, fit) = crate::engine::solved();
+    let plots = fit.parent().unwrap().join("plots");
+    std::fs::create_dir_all(&plots).unwrap();
+    let png = image::RgbImage::from_pixel(4, 4, image::Rgb([200, 10, 10]));
+    png.save(plots.join("radiance-theta.png")).unwrap();
+    png.save(plots.join("calibration-rms.png")).unwrap();
+    let outside = dir.path().join("outside.txt");
+    std::fs::write(&outside, "not a figure").unwrap();
+    std::os::unix::fs::symlink(&outside, plots.join("residual-theta.png")).unwrap();
+    let page = dir.path().join("page");
+    let (code, _, err) = wb(&[
+        "view",
+        fit.to_str().unwrap(),
+        "--out",
+        page.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let mut copied: Vec<String> = std::fs::read_dir(page.join("figures"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    copied.sort();
+    assert_eq!(copied, ["radiance-theta.png"]);
+}

@@ -289,7 +289,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         &md,
         &fig.with_extension("png"),
         &fig.with_extension("svg"),
-    ]);
+    ])?;
     workbench::formats::output::write_bytes(&md, markdown(&report).as_bytes())?;
     error_vs_time(&report).save(&fig)?;
     workbench::formats::output::write_json(&json, &report)?;
