@@ -4,6 +4,7 @@
 //! `workbench render` read it. docs/formats.md describes every field.
 
 use crate::error::{Error, Result};
+use crate::formats::session::RADIUS_RANGE_MM;
 use crate::model::{LightAngles, Model, Params, N_PARAMS, PARAM_NAMES};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -410,6 +411,8 @@ impl FitFile {
                 ),
             ));
         }
+        self.summary_agrees(file)?;
+        self.physical(file)?;
         let m = self.params().material;
         if !(0.0..1.0).contains(&m.kernel_weight)
             || (m.kernel_weight > 0.0 && !(m.kernel_ratio > 1.0))
@@ -423,6 +426,102 @@ impl FitFile {
             ));
         }
         Ok(())
+    }
+}
+
+/// The largest |q| (σ exponent) and |b| (albedo curvature) a fit.json may hold: far beyond what
+/// a fit produces (0.06–0.6 measured), short of what overflows the model or hangs a figure's axes
+/// (b = 10⁴ did).
+pub const EXTENSION_LIMIT: f64 = 20.0;
+
+impl FitFile {
+    /// The summary at the top (σ0, albedo, η, the lobe, the extensions, the light's angles)
+    /// repeats parameters[], which every reader takes: an edit to one alone is refused, so that
+    /// fit.json has one source of truth.
+    fn summary_agrees(&self, file: &Path) -> Result<()> {
+        let p = self.params();
+        let m = &p.material;
+        let mut pairs: Vec<(&str, f64, f64)> = vec![];
+        for c in 0..3 {
+            pairs.push(("sigma0_mm", self.sigma0_mm[c], m.sigma0_mm[c]));
+            pairs.push(("albedo", self.albedo[c], m.albedo[c]));
+        }
+        pairs.push(("eta", self.eta, m.eta));
+        if let Some(s) = &self.specular {
+            pairs.push(("specular.ks", s.ks, m.specular.ks));
+            pairs.push(("specular.alpha", s.alpha, m.specular.alpha));
+        }
+        if let Some(q) = self.sigma_exponent {
+            pairs.push(("sigma_exponent", q, m.sigma_exponent));
+        }
+        if let Some(b) = self.albedo_curvature {
+            pairs.push(("albedo_curvature", b, m.albedo_curvature));
+        }
+        pairs.push((
+            "light_azimuth_deg",
+            self.light_azimuth_deg,
+            p.light.azimuth.to_degrees(),
+        ));
+        pairs.push((
+            "light_elevation_deg",
+            self.light_elevation_deg,
+            p.light.elevation.to_degrees(),
+        ));
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+        match pairs.into_iter().find(|&(_, a, b)| !same(a, b)) {
+            Some((name, a, b)) => Err(Error::invalid(
+                file,
+                format!("{name} is {a} but parameters[] says {b}: every reader takes parameters[]; edit both or neither"),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The values a fit can hold: σ0, albedo and ks ≥ 0, α > 0, η ≥ 1, the extensions within
+    /// [`EXTENSION_LIMIT`], every sphere's radius within [`RADIUS_RANGE_MM`].
+    fn physical(&self, file: &Path) -> Result<()> {
+        let m = self.params().material;
+        let why = if m.sigma0_mm.iter().chain(&m.albedo).any(|v| *v < 0.0) {
+            Some(format!(
+                "σ0 {:?} mm and albedo {:?} must be ≥ 0",
+                m.sigma0_mm, m.albedo
+            ))
+        } else if !(m.eta >= 1.0) {
+            Some(format!("eta {} must be ≥ 1", m.eta))
+        } else if !(m.specular.ks >= 0.0 && m.specular.alpha > 0.0) {
+            Some(format!(
+                "ks {} must be ≥ 0 and alpha {} > 0",
+                m.specular.ks, m.specular.alpha
+            ))
+        } else if m.sigma_exponent.abs() > EXTENSION_LIMIT
+            || m.albedo_curvature.abs() > EXTENSION_LIMIT
+        {
+            Some(format!(
+                "sigma_exponent {} and albedo_curvature {} must lie within ±{EXTENSION_LIMIT}",
+                m.sigma_exponent, m.albedo_curvature
+            ))
+        } else if let Some(s) = self
+            .rmse
+            .spheres
+            .iter()
+            .find(|s| !RADIUS_RANGE_MM.contains(&s.radius_mm))
+        {
+            Some(format!(
+                "sphere radius {} mm ({}) outside {} to {} mm",
+                s.radius_mm, s.image, RADIUS_RANGE_MM.start, RADIUS_RANGE_MM.end
+            ))
+        } else if !(self.reference_radius_mm > 0.0 && self.reference_radius_mm.is_finite()) {
+            Some(format!(
+                "reference_radius_mm {} must be positive",
+                self.reference_radius_mm
+            ))
+        } else {
+            None
+        };
+        match why {
+            Some(w) => Err(Error::invalid(file, w)),
+            None => Ok(()),
+        }
     }
 }
 

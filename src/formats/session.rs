@@ -123,10 +123,10 @@ impl Session {
                 return bad(format!("images[{i}] ({}) lists no spheres", im.file));
             }
             for (j, s) in im.spheres.iter().enumerate() {
-                if !(s.radius_mm.is_finite() && s.radius_mm > 0.0 && s.radius_mm < 1e5) {
+                if !RADIUS_RANGE_MM.contains(&s.radius_mm) {
                     return bad(format!(
-                        "images[{i}] ({}) sphere {j}: radius_mm must be a positive number of mm, got {}",
-                        im.file, s.radius_mm
+                        "images[{i}] ({}) sphere {j}: radius_mm must be a positive number of mm ({} to {}), got {}",
+                        im.file, RADIUS_RANGE_MM.start, RADIUS_RANGE_MM.end, s.radius_mm
                     ));
                 }
                 if s.center_px.is_some() != s.radius_px.is_some() {
@@ -183,6 +183,10 @@ impl Session {
         }
     }
 }
+
+/// The sphere radii a session may give and a fit may hold (mm): a micrometre to 100 m. Beyond, the
+/// blur σ0/r and the curvature 1/r leave what the tables and the renderer keep finite.
+pub const RADIUS_RANGE_MM: std::ops::Range<f64> = 1e-3..1e5;
 
 /// Whether two photo paths of session.json name the same file, `./` components aside.
 fn same_file(a: &str, b: &str) -> bool {

@@ -352,6 +352,13 @@ pub fn write(
 ) -> Result<[PathBuf; 3]> {
     let paths = output_paths(out);
     let [png, exr, json] = &paths;
+    // A table of inf or NaN is no table: said, not written (issue 33).
+    if !lut.values.iter().flatten().all(|v| v.is_finite()) {
+        return Err(Error::invalid(
+            fit_path,
+            "the table of this fit is not finite everywhere: its material is beyond what the model evaluates",
+        ));
+    }
     // One set: the PNG and the EXR, then the sidecar that describes them last.
     let set = crate::formats::output::OutputSet::begin(&[png, exr, json])?;
     let scale = lut.peak().max(f64::MIN_POSITIVE);

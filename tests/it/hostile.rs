@@ -658,6 +658,19 @@ fn table_and_render_options_out_of_range() {
         ),
         (
             vec![
+                "lut",
+                fit,
+                "--out",
+                stem,
+                "--preset",
+                "unity",
+                "--size",
+                "8193x8193",
+            ],
+            "2..2049",
+        ),
+        (
+            vec![
                 "render",
                 obj.to_str().unwrap(),
                 "--fit",
@@ -691,4 +704,75 @@ fn table_and_render_options_out_of_range() {
         );
     }
     assert!(!out.exists() && !tmp.path().join("t.json").exists());
+}
+
+/// fit.json has one reader and one validation (issue 33): a summary value edited without its
+/// parameters[] entry, a negative σ0, an absurd albedo curvature (it hung `plot`) or a sphere of
+/// 10⁻⁹ mm (an EXR of inf) is refused alike by `plot`, `lut` and `view`, in one line, in seconds.
+#[test]
+fn edited_fit_json_is_refused_alike_by_every_reader() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let fit_path = d.join("fit.json");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fit_path).unwrap()).unwrap();
+    let set_param = |v: &mut serde_json::Value, name: &str, x: f64| {
+        for p in v["parameters"].as_array_mut().unwrap() {
+            if p["name"] == name {
+                p["value"] = x.into();
+            }
+        }
+    };
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        (
+            "summary",
+            Box::new(|v| v["sigma0_mm"][0] = 9.0.into()),
+            "parameters[] says",
+        ),
+        (
+            "negative",
+            Box::new(move |v| {
+                v["sigma0_mm"][0] = (-4.0).into();
+                set_param(v, "sigma0_r", -4.0);
+            }),
+            "must be ≥ 0",
+        ),
+        (
+            "curvature",
+            Box::new(move |v| {
+                v["albedo_curvature"] = 1e4.into();
+                set_param(v, "albedo_curvature", 1e4);
+            }),
+            "within ±20",
+        ),
+        (
+            "radius",
+            Box::new(|v| v["rmse"]["spheres"][0]["radius_mm"] = 1e-9.into()),
+            "outside",
+        ),
+    ];
+    for (name, edit, needle) in cases {
+        let mut v = original.clone();
+        edit(&mut v);
+        let f = d.join(format!("fit-{name}.json"));
+        std::fs::write(&f, v.to_string()).unwrap();
+        let (fs, out) = (f.to_str().unwrap(), tmp.path().join(format!("out-{name}")));
+        let os = out.to_str().unwrap();
+        for args in [
+            vec!["plot", fs, "--out", os],
+            vec!["lut", fs, "--out", os],
+            vec!["view", fs, "--out", os],
+        ] {
+            let (code, err) = wb_within(30, &args);
+            assert_ne!(code, 0, "{name}: {args:?}");
+            assert!(
+                err.contains(needle) && err.lines().count() == 1,
+                "{name}: {args:?}: {err}"
+            );
+        }
+        assert!(!out.exists(), "{name}");
+    }
 }

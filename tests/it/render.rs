@@ -375,7 +375,7 @@ fn command_line_lut_render_and_check() {
             vec!["render", mesh, "--fit", mesh, "--out", img_s],
             "torus.ply",
         ),
-        (vec!["lut", fit, "--size", "1x5"], "2..8193"),
+        (vec!["lut", fit, "--size", "1x5"], "2..2049"),
         (vec!["render", mesh, "--fit", fit], "--out"),
     ];
     for (args, needle) in cases {
