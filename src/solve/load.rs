@@ -95,7 +95,7 @@ pub(super) fn load_inspected(
     };
     let mut skipped = vec![];
     let proj = projection(&report, &mut skipped);
-    let detections_path = report.session_file.with_file_name("detections.json");
+    let detections_path = detections_location(opts, &report, &now);
     let t1 = Instant::now();
     let (detections, decoded) =
         detections(opts, (&report, &sess), &now, &detections_path, &mut skipped)?;
@@ -218,7 +218,8 @@ pub(super) fn cached(
         return None;
     }
     let mut now = now.clone();
-    let det = report.session_file.with_file_name("detections.json");
+    // The detections the fit was made from, wherever they were (beside the session or the fit).
+    let det = PathBuf::from(&f.detections);
     now.insert(det.display().to_string(), fingerprint::of_file(&det).ok()?);
     fingerprint::differs(&f.inputs, &now)
         .is_none()
@@ -243,6 +244,29 @@ fn projection(report: &SessionReport, skipped: &mut Vec<String>) -> Projection {
             skipped.push("calibration: no intrinsics in session.json, orthographic camera".into());
             Projection::Orthographic
         }
+    }
+}
+
+/// Where detections.json (and the overlays beside it) is read and written: the session's own, or
+/// — when `--out` puts the fit in another folder and the session's cannot be reused — one beside
+/// the fit, so that nothing is written into the session folder and a read-only dataset can be
+/// solved (issue 33).
+fn detections_location(opts: &Options, report: &SessionReport, now: &Inputs) -> PathBuf {
+    let in_session = report.session_file.with_file_name("detections.json");
+    let Some(out) = &opts.out else {
+        return in_session;
+    };
+    let beside = out.with_file_name("detections.json");
+    let folder = |p: &Path| {
+        let dir = p.parent().unwrap_or(Path::new("."));
+        std::fs::canonicalize(dir)
+            .unwrap_or_else(|_| std::path::absolute(dir).unwrap_or(dir.into()))
+    };
+    let reuse_session = !opts.redetect && reusable(&in_session, report, now).is_ok();
+    if reuse_session || folder(&beside) == folder(&in_session) {
+        in_session
+    } else {
+        beside
     }
 }
 
@@ -272,7 +296,7 @@ fn detections(
             let d = detect::run_decoded(
                 &detect::Options {
                     session: report.session_file.clone(),
-                    out: None,
+                    out: Some(detections_path.to_path_buf()),
                     overlays: true,
                     quiet: opts.quiet,
                 },

@@ -14,6 +14,9 @@ pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> 
     let session = fit.session_path(fit_path)?;
     let mut opts = super::Options::new(&session);
     opts.quiet = quiet;
+    // Detections are looked for beside the session, then beside the fit (as `solve --out` left
+    // them); nothing is written into a session folder that is not the fit's.
+    opts.out = Some(fit_path.to_path_buf());
     let l = super::load(&opts)?;
     let same = l.spheres.len() == fit.rmse.spheres.len()
         && l.spheres

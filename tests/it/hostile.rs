@@ -776,3 +776,43 @@ fn edited_fit_json_is_refused_alike_by_every_reader() {
         assert!(!out.exists(), "{name}");
     }
 }
+
+/// Every file under `dir` with its bytes.
+fn tree_of(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// `solve --out` in another folder writes nothing into the session folder (issue 33: it wrote
+/// detections.json and overlays/ there, so a read-only dataset could not be solved): detection's
+/// files go beside the fit, a rerun reuses them, and `plot` of that fit finds them there.
+#[test]
+fn solve_elsewhere_leaves_the_session_folder_as_it_was() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let before = tree_of(&d);
+    let out = tmp.path().join("results").join("fit.json");
+    let (ds, os) = (d.to_str().unwrap(), out.to_str().unwrap());
+    let (code, err) = wb(&["solve", ds, "--out", os]);
+    assert_eq!(code, 0, "{err}");
+    let results = out.parent().unwrap();
+    assert!(results.join("detections.json").is_file() && results.join("overlays").is_dir());
+    let (code, out2, err) = common::wb(&["solve", ds, "--out", os]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out2.contains("reused"), "{out2}");
+    let plots = tmp.path().join("plots");
+    let (code, err) = wb(&["plot", os, "--out", plots.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(tree_of(&d) == before, "the session folder changed");
+}
