@@ -309,8 +309,10 @@ fn solve_writes_fit_json_and_refuses_bad_options() {
         serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
     assert_eq!(v["schema"], "workbench.fit/1");
     assert_eq!(v["sigma0_mm"].as_array().unwrap().len(), 3);
-    // Detection ran once and wrote detections.json beside session.json.
-    assert!(out.join("detections.json").is_file());
+    // Detection ran once and, --out lying in another folder, wrote detections.json beside the
+    // fit, not into the session folder.
+    assert!(dir.path().join("detections.json").is_file());
+    assert!(!out.join("detections.json").exists());
     assert_clean_failure(&["solve", o, "--reduce", "3"], "cell width");
     assert_clean_failure(&["solve", o, "--prior", "alpha=0.1:0.1"], "eta only");
     assert_clean_failure(&["solve", o, "--prior", "eta=0.9:0.1"], "1 < mean");
