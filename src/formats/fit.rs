@@ -11,6 +11,21 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const SCHEMA: &str = "workbench.fit/1";
 
+/// A standard error (or another figure) that is infinite or NaN where a fit failed is written as
+/// null — JSON has no infinity — and read back as NaN, "not finite", so that every reader opens a
+/// failed fit (issue 33: `plot`, what a user opens one with, refused it).
+mod nullable {
+    use serde::{Deserialize, Deserializer};
+
+    pub fn f64<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+
+    pub fn f64x3<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+        Ok(<[Option<f64>; 3]>::deserialize(d)?.map(|x| x.unwrap_or(f64::NAN)))
+    }
+}
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
@@ -22,18 +37,24 @@ pub enum Method {
 /// A specular lobe as written.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SpecularJson {
+    #[serde(deserialize_with = "nullable::f64")]
     pub ks: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub alpha: f64,
 }
 
 /// Standard errors, mirroring the values.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StdJson {
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma0_mm: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub albedo: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64")]
     pub eta: f64,
     pub specular: Option<SpecularJson>,
     /// Angular standard error of the light direction (degrees; from the two angles').
+    #[serde(deserialize_with = "nullable::f64")]
     pub light_deg: f64,
     pub sigma_exponent: Option<f64>,
     pub albedo_curvature: Option<f64>,
@@ -44,7 +65,9 @@ pub struct StdJson {
 /// The two-Gaussian kernel: (1 − weight)·f(θ; σ) + weight·f(θ; ratio·σ).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct KernelJson {
+    #[serde(deserialize_with = "nullable::f64")]
     pub weight: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub ratio: f64,
 }
 
@@ -54,6 +77,7 @@ pub struct ParamJson {
     pub name: String,
     pub value: f64,
     /// The standard error stated: see `FitFile::std_source`.
+    #[serde(deserialize_with = "nullable::f64")]
     pub std: f64,
     /// From σ²(JᵀJ)⁻¹ (noise only, the model taken as exact).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -559,6 +583,7 @@ pub struct Level {
     pub highlight_block_px: u32,
     pub observations: usize,
     /// Predicted largest parameter shift, in standard errors.
+    #[serde(deserialize_with = "nullable::f64")]
     pub predicted_shift_std: f64,
     /// Every parameter's predicted shift is below `SHIFT_LIMIT` (fit::joint) standard errors or below its
     /// tolerance (`fit::reduce::tolerance`).

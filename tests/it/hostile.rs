@@ -816,3 +816,40 @@ fn solve_elsewhere_leaves_the_session_folder_as_it_was() {
     assert_eq!(code, 0, "{err}");
     assert!(tree_of(&d) == before, "the session folder changed");
 }
+
+/// A fit whose standard errors are not finite (fit.json holds null for them) opens in every
+/// reader (issue 33: `plot`, `view` and `lut` refused their own failed fits with "invalid type:
+/// null, expected f64"): `plot` draws it, `view` shows it, and `lut` says why it makes no table.
+#[test]
+fn failed_fits_open_in_their_readers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let ds = d.to_str().unwrap();
+    for (name, extra) in [
+        ("sigma", ["--start-sigma0", "1e300"]),
+        ("irradiance", ["--irradiance", "1e300"]),
+    ] {
+        let fit = tmp.path().join(format!("{name}.json"));
+        let fs = fit.to_str().unwrap();
+        let (code, err) = wb(&[&["solve", ds, "--out", fs][..], &extra[..]].concat());
+        assert!(code == 0 || code == 3, "{name}: {err}");
+        let text = std::fs::read_to_string(&fit).unwrap();
+        println!(
+            "{name}: exit {code}, {} nulls in fit.json",
+            text.matches("null").count()
+        );
+        let plots = tmp.path().join(format!("plots-{name}"));
+        let (code, err) = wb_within(60, &["plot", fs, "--out", plots.to_str().unwrap()]);
+        assert_eq!(code, 0, "{name}: plot: {err}");
+        assert!(plots.join("radiance-theta.png").is_file());
+        let page = tmp.path().join(format!("view-{name}"));
+        let (code, err) = wb_within(60, &["view", fs, "--out", page.to_str().unwrap()]);
+        assert_eq!(code, 0, "{name}: view: {err}");
+        let (code, err) = wb_within(
+            60,
+            &["lut", fs, "--out", tmp.path().join(name).to_str().unwrap()],
+        );
+        assert!(code == 0 || err.lines().count() == 1, "{name}: lut: {err}");
+        assert!(!err.contains("invalid type"), "{name}: lut: {err}");
+    }
+}
