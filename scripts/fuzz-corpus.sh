@@ -27,6 +27,25 @@ cp datasets/demo/detections.json "$c/detections_json/demo.json"
 cp "$tmp/wax/detections.json" "$c/detections_json/pbr-wax.json"
 cp calib/demo/intrinsics.json "$c/intrinsics_json/demo.json"
 cp datasets/pbr-wax/intrinsics.json "$c/intrinsics_json/pbr-wax.json"
+# Issue 33's holes as seeds: a failed fit (standard errors null), values at the extremes, and a
+# session listing one photo twice.
+"$wb" --quiet synth session --out "$tmp/small" --size 320x240 --fx 350 --radii 30,20,12 >/dev/null
+"$wb" --quiet solve "$tmp/small" --start-sigma0 1e300 --out "$c/fit_json/failed.json" >/dev/null || true
+python3 - "$c" <<'PY'
+import json, sys
+c = sys.argv[1]
+fit = json.load(open(f"{c}/fit_json/demo.json"))
+for name, edit in [("curvature", ("albedo_curvature", 1e4)), ("negative", ("sigma0_r", -4.0))]:
+    f = json.loads(json.dumps(fit))
+    for p in f["parameters"]:
+        if p["name"] == edit[0]:
+            p["value"] = edit[1]
+    f["rmse"]["spheres"][0]["radius_mm"] = 1e-9
+    json.dump(f, open(f"{c}/fit_json/{name}.json", "w"))
+s = json.load(open(f"{c}/session_json/demo.json"))
+s["images"].append(dict(s["images"][0], file="./" + s["images"][0]["file"]))
+json.dump(s, open(f"{c}/session_json/twice.json", "w"))
+PY
 
 # Images: a 16-bit PNG (the demo's), two JPEGs with EXIF (a small synthetic session) and an 8-bit
 # TIFF (written here, baseline and uncompressed).

@@ -11,6 +11,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    cli::signals::clean_up_on_signals();
     let cli = match cli::Cli::try_parse() {
         Ok(cli) => cli,
         // --help, --version, and no subcommand at all: clap's full text.

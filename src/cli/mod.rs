@@ -6,6 +6,8 @@ pub(crate) mod parse;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use parse::*;
+
+pub(crate) mod signals;
 use std::path::PathBuf;
 use workbench::camera::{Camera, Distortion};
 use workbench::model::LightAngles;

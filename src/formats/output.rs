@@ -37,6 +37,24 @@ struct Open {
 static OPEN: Mutex<Vec<Open>> = Mutex::new(Vec::new());
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
+/// Every temporary this process has created and not yet renamed into place: what an interrupted
+/// run deletes on its way out ([`discard_temporaries`]).
+static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn live() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    LIVE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Delete every temporary not yet renamed into place, for a run stopped by SIGINT or SIGTERM
+/// (the binary's signal thread calls it before exiting; issue 33: `plot` and `lut` left
+/// `.workbench-*.tmp` files). The previous outputs stay as they were: nothing was renamed over
+/// them. A file already renamed or deleted is skipped.
+pub fn discard_temporaries() {
+    for p in live().drain(..) {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
 fn open_sets() -> std::sync::MutexGuard<'static, Vec<Open>> {
     OPEN.lock().unwrap_or_else(|e| e.into_inner())
 }
@@ -82,9 +100,11 @@ impl OutputSet {
         };
         let mut dirs: Vec<PathBuf> = vec![];
         for p in open.pending {
+            let tmp_path = p.tmp.to_path_buf();
             p.tmp
                 .persist(&p.dest)
                 .map_err(|e| Error::io(&p.dest, e.error))?;
+            live().retain(|l| *l != tmp_path);
             let dir = parent(&p.dest).to_path_buf();
             if !dirs.contains(&dir) {
                 dirs.push(dir);
@@ -156,15 +176,21 @@ fn replaceable(path: &Path, folder_ok: bool) -> Result<()> {
 /// Files written so far by this process, for the test hook below.
 static WRITTEN: AtomicUsize = AtomicUsize::new(0);
 
-/// Test hook: with `WORKBENCH_ABORT_AFTER_WRITES=n` in the environment, the process aborts (as
-/// if killed) right after its n-th output file is written, before any later rename or commit.
-/// The kill tests (`tests/it/reliability.rs`) use it to stop commands at every point.
+/// Test hooks: with `WORKBENCH_ABORT_AFTER_WRITES=n` in the environment, the process aborts (as
+/// if killed) right after its n-th output file is written, before any later rename or commit;
+/// with `WORKBENCH_PAUSE_AFTER_WRITES=n` it waits 30 s there instead, for a test to signal it.
+/// The kill tests (`tests/it/reliability.rs`) use them to stop commands at every point.
 fn abort_hook() {
     let n = WRITTEN.fetch_add(1, Ordering::SeqCst) + 1;
-    if let Some(limit) = std::env::var_os("WORKBENCH_ABORT_AFTER_WRITES") {
-        if limit.to_str().and_then(|v| v.parse::<usize>().ok()) == Some(n) {
-            std::process::abort();
-        }
+    let at = |var: &str| {
+        std::env::var_os(var).and_then(|v| v.to_str().and_then(|v| v.parse::<usize>().ok()))
+            == Some(n)
+    };
+    if at("WORKBENCH_ABORT_AFTER_WRITES") {
+        std::process::abort();
+    }
+    if at("WORKBENCH_PAUSE_AFTER_WRITES") {
+        std::thread::sleep(std::time::Duration::from_secs(30));
     }
 }
 
@@ -182,6 +208,7 @@ where
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(|e| Error::io(dir, e))?;
+    live().push(tmp.path().to_path_buf());
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         write(&mut w).map_err(|e| Error::io(path, e))?;
@@ -212,7 +239,9 @@ where
             return Ok(());
         }
     }
+    let tmp_path = tmp.path().to_path_buf();
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    live().retain(|l| *l != tmp_path);
     sync_dir(dir)
 }
 

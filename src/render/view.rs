@@ -101,8 +101,6 @@ pub struct ViewOptions<'a> {
 
 /// Write the page into `out` (created; its files replaced), as one set.
 pub fn write(o: ViewOptions) -> Result<ViewReport> {
-    crate::formats::input::regular_file(o.fit)?;
-    let fit_text = std::fs::read_to_string(o.fit).map_err(|e| Error::io(o.fit, e))?;
     let (fit, fm) = read_fit(o.fit)?;
     // The table of the generic preset, as `lut --preset generic` chooses it.
     let (table, err, _, _) =
@@ -166,12 +164,14 @@ pub fn write(o: ViewOptions) -> Result<ViewReport> {
         },
         "figures": figures.iter().map(|(_, n)| n.clone()).collect::<Vec<_>>(),
     });
-    // fit.json goes in verbatim: the page checks it (and says so when it is broken).
-    let data = format!(
-        "window.WORKBENCH = {{\n\"fit\": {},\n\"scene\": {}\n}};\n",
-        fit_text.trim(),
-        scene
-    );
+    // fit.json as read, its known fields written again: the page checks it (and says so when
+    // it is broken); an unknown field, however deeply nested, stays out (issue 33: a 100 000-deep
+    // one made a data.js that browsers reject).
+    let fit_json = serde_json::to_string(&fit).map_err(|e| Error::Json {
+        path: o.fit.to_path_buf(),
+        err: e,
+    })?;
+    let data = format!("window.WORKBENCH = {{\n\"fit\": {fit_json},\n\"scene\": {scene}\n}};\n");
     std::fs::create_dir_all(o.out).map_err(|e| Error::io(o.out, e))?;
     let index = o.out.join("index.html");
     let js = o.out.join("viewer.js");

@@ -853,3 +853,39 @@ fn failed_fits_open_in_their_readers() {
         assert!(!err.contains("invalid type"), "{name}: lut: {err}");
     }
 }
+
+/// An unknown field nested 100 000 deep in fit.json (issue 33: `view` copied it into a data.js
+/// that browsers reject, with exit 0) is refused in one line or left out of the page.
+#[test]
+fn a_deeply_nested_unknown_field_stays_out_of_the_page() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = session_in(tmp.path(), "s", Format::Png16);
+    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(d.join("fit.json")).unwrap();
+    let deep = format!("{}1{}", "[".repeat(100_000), "]".repeat(100_000));
+    let edited = text.replacen('{', &format!("{{\"zz_unknown\": {deep},"), 1);
+    let fit = tmp.path().join("deep.json");
+    std::fs::write(&fit, edited).unwrap();
+    let page = tmp.path().join("page");
+    let (code, err) = wb_within(
+        60,
+        &[
+            "view",
+            fit.to_str().unwrap(),
+            "--out",
+            page.to_str().unwrap(),
+        ],
+    );
+    if code == 0 {
+        let data = std::fs::read_to_string(page.join("data.js")).unwrap();
+        assert!(
+            !data.contains("zz_unknown") && data.len() < 1_000_000,
+            "{} bytes",
+            data.len()
+        );
+    } else {
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!page.exists());
+    }
+}

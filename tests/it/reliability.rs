@@ -265,3 +265,72 @@ fn stale_results_are_never_reused_whatever_the_times() {
         "{replaced}"
     );
 }
+
+/// SIGINT or SIGTERM in the middle of a set (issue 33: `plot` and `lut` left `.workbench-*.tmp`
+/// files): the run deletes its temporaries, exits with 128 + the signal, and the previous
+/// outputs stay as they were. The run is paused after its second file (a test hook) and signalled
+/// there.
+#[cfg(unix)]
+#[test]
+fn a_signal_leaves_no_temporaries() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = row_session(tmp.path(), "s", "1");
+    let (code, _, err) = wb(&["--quiet", "solve", s.to_str().unwrap()]);
+    assert!(code == 0 || code == 3, "{err}");
+    let fit = s.join("fit.json");
+    let plots = tmp.path().join("plots");
+    let (code, _, err) = wb(&[
+        "--quiet",
+        "plot",
+        fit.to_str().unwrap(),
+        "--out",
+        plots.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let before = snapshot(&plots);
+    for (signal, name) in [(15, "TERM"), (2, "INT")] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_workbench"))
+            .args([
+                "--quiet",
+                "plot",
+                fit.to_str().unwrap(),
+                "--out",
+                plots.to_str().unwrap(),
+            ])
+            .env("WORKBENCH_PAUSE_AFTER_WRITES", "2")
+            .spawn()
+            .unwrap();
+        let temporaries = || {
+            std::fs::read_dir(&plots)
+                .unwrap()
+                .filter(|e| {
+                    e.as_ref()
+                        .unwrap()
+                        .file_name()
+                        .to_string_lossy()
+                        .starts_with(".workbench-")
+                })
+                .count()
+        };
+        let t = std::time::Instant::now();
+        while temporaries() < 2 {
+            assert!(
+                t.elapsed().as_secs() < 20,
+                "SIG{name}: the run never paused"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let killed = std::process::Command::new("kill")
+            .args([format!("-{name}"), child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let status = child.wait().unwrap();
+        assert_eq!(status.code(), Some(128 + signal), "SIG{name}");
+        assert_eq!(temporaries(), 0, "SIG{name}: temporaries left");
+        assert!(
+            snapshot(&plots) == before,
+            "SIG{name}: the previous figures changed"
+        );
+    }
+}
