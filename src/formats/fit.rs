@@ -11,9 +11,10 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const SCHEMA: &str = "workbench.fit/1";
 
-/// A standard error (or another figure) that is infinite or NaN where a fit failed is written as
-/// null — JSON has no infinity — and read back as NaN, "not finite", so that every reader opens a
-/// failed fit (issue 33: `plot`, what a user opens one with, refused it).
+/// Every number of fit.json that is infinite or NaN where a fit failed (a standard error, a cost,
+/// a correlation) is written as null — JSON has no infinity — and read back as NaN, "not finite",
+/// so that every reader opens a failed fit (issue 33: `plot`, what a user opens one with, refused
+/// it). Each float field of the file carries one of these.
 mod nullable {
     use serde::{Deserialize, Deserializer};
 
@@ -23,6 +24,31 @@ mod nullable {
 
     pub fn f64x3<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
         Ok(<[Option<f64>; 3]>::deserialize(d)?.map(|x| x.unwrap_or(f64::NAN)))
+    }
+
+    pub fn opt_f64x3<'de, D: Deserializer<'de>>(d: D) -> Result<Option<[f64; 3]>, D::Error> {
+        Ok(Option::<[Option<f64>; 3]>::deserialize(d)?.map(|a| a.map(|x| x.unwrap_or(f64::NAN))))
+    }
+
+    pub fn named<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<(String, f64)>, D::Error> {
+        Ok(Vec::<(String, Option<f64>)>::deserialize(d)?
+            .into_iter()
+            .map(|(n, x)| (n, x.unwrap_or(f64::NAN)))
+            .collect())
+    }
+
+    pub fn vec<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        Ok(Vec::<Option<f64>>::deserialize(d)?
+            .into_iter()
+            .map(|x| x.unwrap_or(f64::NAN))
+            .collect())
+    }
+
+    pub fn matrix<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<f64>>, D::Error> {
+        Ok(Vec::<Vec<Option<f64>>>::deserialize(d)?
+            .into_iter()
+            .map(|r| r.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+            .collect())
     }
 }
 
@@ -75,6 +101,7 @@ pub struct KernelJson {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ParamJson {
     pub name: String,
+    #[serde(deserialize_with = "nullable::f64")]
     pub value: f64,
     /// The standard error stated: see `FitFile::std_source`.
     #[serde(deserialize_with = "nullable::f64")]
@@ -96,13 +123,16 @@ pub struct ParamJson {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CorrelationJson {
     pub names: Vec<String>,
+    #[serde(deserialize_with = "nullable::matrix")]
     pub matrix: Vec<Vec<f64>>,
 }
 
 /// A dark floor fitted with the material: pixel values (full scale 1) per channel.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DarkFloorJson {
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub value: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub std: [f64; 3],
 }
 
@@ -110,6 +140,7 @@ pub struct DarkFloorJson {
 pub struct SphereRmse {
     pub image: String,
     pub index: usize,
+    #[serde(deserialize_with = "nullable::f64")]
     pub radius_mm: f64,
     /// Pixels used by the fit (saturated and edge pixels left out) and how many were left out.
     pub pixels: usize,
@@ -120,12 +151,18 @@ pub struct SphereRmse {
     #[serde(default)]
     pub impulses: usize,
     /// Pixel noise σ per channel (radiance units), as measured.
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub noise: [f64; 3],
     /// The photo's dark floor, subtracted before fitting (null: not measurable).
+    #[serde(default, deserialize_with = "nullable::opt_f64x3")]
     pub floor: Option<[f64; 3]>,
+    #[serde(deserialize_with = "nullable::f64")]
     pub rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub rel_rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub lit_rel_rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub unlit_rel_rmse: f64,
     /// Held out of the fit.
     pub held_out: bool,
@@ -134,17 +171,23 @@ pub struct SphereRmse {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RmseJson {
     /// Over all spheres' pixels (radiance units), and relative to their RMS.
+    #[serde(deserialize_with = "nullable::f64")]
     pub overall: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub relative: f64,
     pub spheres: Vec<SphereRmse>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HoldoutJson {
+    #[serde(deserialize_with = "nullable::f64")]
     pub radius_mm: f64,
     pub pixels: usize,
+    #[serde(deserialize_with = "nullable::f64")]
     pub rel_rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub lit_rel_rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub unlit_rel_rmse: f64,
 }
 
@@ -159,14 +202,17 @@ pub struct JackknifeJson {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub newton_steps: Vec<u32>,
     /// The radii left out in turn (mm).
+    #[serde(deserialize_with = "nullable::vec")]
     pub radii: Vec<f64>,
     /// Each left-out radius predicted by the fit to the others.
     pub heldout: Vec<HoldoutJson>,
     /// Pixel-weighted mean of the held-out relative RMSE.
+    #[serde(deserialize_with = "nullable::f64")]
     pub heldout_rel_rmse: f64,
     /// Every refit converged (with "linear": every step was a descent of its subset's normal
     /// equations).
     pub converged: bool,
+    #[serde(deserialize_with = "nullable::f64")]
     pub seconds: f64,
 }
 
@@ -178,6 +224,7 @@ pub struct ReductionJson {
     pub chosen: Level,
     /// Levels tried, coarsest first (with `auto`).
     pub levels: Vec<Level>,
+    #[serde(deserialize_with = "nullable::f64")]
     pub shift_limit_std: f64,
 }
 
@@ -198,6 +245,7 @@ pub struct ConvergenceJson {
 pub struct Candidate {
     pub extensions: String,
     /// Mean over radii of the held-out relative RMSE (each radius left out in turn).
+    #[serde(deserialize_with = "nullable::f64")]
     pub heldout_rel_rmse: f64,
     pub converged: bool,
 }
@@ -211,19 +259,29 @@ pub struct ModelChoice {
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Timings {
+    #[serde(deserialize_with = "nullable::f64")]
     pub inspect_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub detect_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub decode_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub samples_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub solve_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub model_choice_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub holdout_s: f64,
     /// The leave-one-radius-out refits.
     #[serde(default)]
+    #[serde(deserialize_with = "nullable::f64")]
     pub jackknife_s: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub total_s: f64,
     /// The solve stage's phases (joint method), seconds.
     #[serde(default)]
+    #[serde(deserialize_with = "nullable::named")]
     pub solve_phases: Vec<(String, f64)>,
 }
 
@@ -235,13 +293,19 @@ pub struct FitFile {
     pub session: String,
     pub detections: String,
     pub projection: String,
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma0_mm: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub albedo: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64")]
     pub eta: f64,
     /// Null when no lobe was fitted.
     pub specular: Option<SpecularJson>,
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub light_direction: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64")]
     pub light_azimuth_deg: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub light_elevation_deg: f64,
     /// Under `"light": "per-image"`: each photo's fitted light (`light_direction` is the first's).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -252,6 +316,7 @@ pub struct FitFile {
     /// The kernel's shape when it is two Gaussians (null: one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<KernelJson>,
+    #[serde(deserialize_with = "nullable::f64")]
     pub reference_radius_mm: f64,
     /// The diffuse term blurs the irradiance transmitted into the medium (entry-side Fresnel,
     /// docs/model.md); false for the paper's procedure and in files written before it.
@@ -308,14 +373,21 @@ pub struct FitFile {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BaselineJson {
     /// η divided out, the light taken from the detector (degrees), the mask around the peak.
+    #[serde(deserialize_with = "nullable::f64")]
     pub eta: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub light_azimuth_deg: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub light_elevation_deg: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub mask_deg: f64,
     /// Combined over radii.
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma0_mm: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub albedo: [f64; 3],
     pub per_radius: Vec<RadiusFit>,
+    #[serde(deserialize_with = "nullable::f64")]
     pub seconds: f64,
 }
 
@@ -553,8 +625,11 @@ impl FitFile {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImageLightJson {
     pub file: String,
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub direction: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64")]
     pub azimuth_deg: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub elevation_deg: f64,
 }
 
@@ -567,10 +642,14 @@ pub struct Stage {
     pub evaluations: usize,
     pub termination: String,
     pub converged: bool,
+    #[serde(deserialize_with = "nullable::f64")]
     pub cost_start: f64,
+    #[serde(deserialize_with = "nullable::f64")]
     pub cost_end: f64,
     /// ½Σr² at every residual evaluation (trial steps included).
+    #[serde(deserialize_with = "nullable::vec")]
     pub cost_history: Vec<f64>,
+    #[serde(deserialize_with = "nullable::f64")]
     pub seconds: f64,
 }
 
@@ -578,6 +657,7 @@ pub struct Stage {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Level {
     /// Cell width (degrees; 0 = every pixel).
+    #[serde(deserialize_with = "nullable::f64")]
     pub width_deg: f64,
     /// Highlight pixels pooled in blocks of this many pixels square (1: one by one).
     pub highlight_block_px: u32,
@@ -596,26 +676,35 @@ pub struct Level {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LightPull {
     /// Angle between the fitted light and the detector's (degrees).
+    #[serde(deserialize_with = "nullable::f64")]
     pub moved_deg: f64,
     /// The detector's standard error (degrees).
+    #[serde(deserialize_with = "nullable::f64")]
     pub detector_std_deg: f64,
     /// The prior's width (degrees; null without a prior, `--free-light`).
     pub prior_std_deg: Option<f64>,
     /// `moved_deg` over the prior's width (or the detector's error without one).
+    #[serde(deserialize_with = "nullable::f64")]
     pub pull: f64,
 }
 
 /// One radius's fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RadiusFit {
+    #[serde(deserialize_with = "nullable::f64")]
     pub radius_mm: f64,
     pub spheres: usize,
     pub pixels: usize,
     /// Fitted blur width σ (radians) and σ0 = σ · r (mm), per channel, with standard errors.
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma_rad: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma0_mm: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma0_std: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub albedo: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
     pub albedo_std: [f64; 3],
     pub converged: bool,
 }

@@ -3,6 +3,7 @@
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::formats::photo::MAX_PIXELS;
 use crate::model::LightAngles;
 use crate::render::check::{self, SphereComparison};
 use crate::render::lut::{self, FitMaterial, InterpolationError, Lut};
@@ -331,10 +332,13 @@ pub fn run(o: &RenderOptions) -> Result<RenderReport> {
             o.bits
         )));
     }
-    if o.width < 16 || o.height < 16 || o.width > 16384 || o.height > 16384 {
+    let pixels = o.width as u64 * o.height as u64;
+    if o.width < 16 || o.height < 16 || o.width > 16384 || o.height > 16384 || pixels > MAX_PIXELS {
         return Err(Error::Argument(format!(
-            "--resolution {}x{}: each side must be 16..16384",
-            o.width, o.height
+            "--resolution {}x{}: each side must be 16..16384 and the image at most {} MP (what workbench reads)",
+            o.width,
+            o.height,
+            MAX_PIXELS / 1_000_000
         )));
     }
     if !(o.fov_deg > 1.0 && o.fov_deg < 170.0) {
