@@ -52,6 +52,15 @@ fn session_in(tmp: &Path, name: &str, format: Format) -> PathBuf {
     dir
 }
 
+/// [`session_in`], solved with the defaults: the folder and its fit.json.
+fn solved_in(tmp: &Path, name: &str) -> (PathBuf, PathBuf) {
+    let d = session_in(tmp, name, Format::Png16);
+    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let fit = d.join("fit.json");
+    (d, fit)
+}
+
 fn photo(dir: &Path) -> PathBuf {
     std::fs::read_dir(dir)
         .unwrap()
@@ -311,10 +320,7 @@ fn bad_session_json() {
 fn outputs_never_replace_special_files() {
     use std::os::unix::fs::FileTypeExt;
     let tmp = tempfile::tempdir().unwrap();
-    let d = session_in(tmp.path(), "s", Format::Png16);
-    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
-    let fit = d.join("fit.json");
+    let (d, fit) = solved_in(tmp.path(), "s");
     let out = tmp.path().join("out");
     std::fs::create_dir(&out).unwrap();
     let fifo = out.join("fifo.json");
@@ -533,10 +539,7 @@ fn wb_within(secs: u64, args: &[&str]) -> (i32, String) {
 #[test]
 fn special_files_as_inputs_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
-    let solved = session_in(tmp.path(), "solved", Format::Png16);
-    let (code, err) = wb(&["solve", solved.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
-    let fit = solved.join("fit.json");
+    let (_, fit) = solved_in(tmp.path(), "solved");
     let d = session_in(tmp.path(), "s", Format::Png16);
     let p = photo(&d);
     std::fs::remove_file(&p).unwrap();
@@ -639,10 +642,7 @@ fn a_session_path_that_is_not_utf8_is_refused() {
 #[test]
 fn table_and_render_options_out_of_range() {
     let tmp = tempfile::tempdir().unwrap();
-    let d = session_in(tmp.path(), "s", Format::Png16);
-    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
-    let fit = d.join("fit.json");
+    let (_, fit) = solved_in(tmp.path(), "s");
     let (fit, stem) = (fit.to_str().unwrap(), tmp.path().join("t"));
     let stem = stem.to_str().unwrap();
     let obj = crate::view::torus_obj(tmp.path());
@@ -712,10 +712,7 @@ fn table_and_render_options_out_of_range() {
 #[test]
 fn edited_fit_json_is_refused_alike_by_every_reader() {
     let tmp = tempfile::tempdir().unwrap();
-    let d = session_in(tmp.path(), "s", Format::Png16);
-    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
-    let fit_path = d.join("fit.json");
+    let (d, fit_path) = solved_in(tmp.path(), "s");
     let original: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fit_path).unwrap()).unwrap();
     let set_param = |v: &mut serde_json::Value, name: &str, x: f64| {
@@ -897,10 +894,8 @@ fn failed_fits_open_in_their_readers() {
 #[test]
 fn a_deeply_nested_unknown_field_stays_out_of_the_page() {
     let tmp = tempfile::tempdir().unwrap();
-    let d = session_in(tmp.path(), "s", Format::Png16);
-    let (code, err) = wb(&["solve", d.to_str().unwrap()]);
-    assert_eq!(code, 0, "{err}");
-    let text = std::fs::read_to_string(d.join("fit.json")).unwrap();
+    let (_, fit_file) = solved_in(tmp.path(), "s");
+    let text = std::fs::read_to_string(&fit_file).unwrap();
     let deep = format!("{}1{}", "[".repeat(100_000), "]".repeat(100_000));
     let edited = text.replacen('{', &format!("{{\"zz_unknown\": {deep},"), 1);
     let fit = tmp.path().join("deep.json");

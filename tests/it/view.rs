@@ -126,11 +126,9 @@ fn the_page_shows_what_render_draws() {
     assert!(rel <= 0.02, "relative RMS {rel}");
 }
 
-#[test]
-fn a_broken_fit_shows_an_error_on_the_page() {
-    let Some(tool) = chromium() else { return };
-    let (dir, fit) = crate::engine::solved();
-    let page = dir.path().join("page");
+/// `workbench view <fit> --out <dir>/page`, which must succeed: the page's folder.
+fn page_of(dir: &Path, fit: &Path) -> PathBuf {
+    let page = dir.join("page");
     let (code, _, err) = wb(&[
         "view",
         fit.to_str().unwrap(),
@@ -138,6 +136,14 @@ fn a_broken_fit_shows_an_error_on_the_page() {
         page.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
+    page
+}
+
+#[test]
+fn a_broken_fit_shows_an_error_on_the_page() {
+    let Some(tool) = chromium() else { return };
+    let (dir, fit) = crate::engine::solved();
+    let page = page_of(dir.path(), &fit);
     let data = std::fs::read_to_string(page.join("data.js")).unwrap();
     let index = page.join("index.html");
     // The fit's η not a number, then data.js cut short (fit.json truncated: not JSON at all).
@@ -190,14 +196,7 @@ fn the_page_copies_only_the_fits_figures() {
     let outside = dir.path().join("outside.txt");
     std::fs::write(&outside, "not a figure").unwrap();
     std::os::unix::fs::symlink(&outside, plots.join("residual-theta.png")).unwrap();
-    let page = dir.path().join("page");
-    let (code, _, err) = wb(&[
-        "view",
-        fit.to_str().unwrap(),
-        "--out",
-        page.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let page = page_of(dir.path(), &fit);
     let mut copied: Vec<String> = std::fs::read_dir(page.join("figures"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
