@@ -6,53 +6,34 @@ pub(crate) fn angles(s: &str) -> std::result::Result<[f64; 2], String> {
     let (a, b) = s
         .split_once(',')
         .ok_or_else(|| format!("expected AZIMUTH,ELEVATION in degrees, got {s:?}"))?;
-    let p = |t: &str| {
-        t.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("not a finite number: {t:?}"))
-    };
-    let (az, el) = (p(a)?, p(b)?);
-    Ok([azimuth(az)?, elevation(el)?])
+    Ok([azimuth_arg(a)?, elevation_arg(b)?])
 }
 
 /// An azimuth in degrees: finite, within one turn either way.
-pub(crate) fn azimuth(v: f64) -> std::result::Result<f64, String> {
-    if (-360.0..=360.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!(
-            "an azimuth must lie in [-360, 360] degrees, got {v}"
-        ))
-    }
+pub(crate) fn azimuth_arg(s: &str) -> std::result::Result<f64, String> {
+    degrees(s, "an azimuth", 360.0)
 }
 
 /// An elevation in degrees: within [−90, 90].
-pub(crate) fn elevation(v: f64) -> std::result::Result<f64, String> {
-    if (-90.0..=90.0).contains(&v) {
+pub(crate) fn elevation_arg(s: &str) -> std::result::Result<f64, String> {
+    degrees(s, "an elevation", 90.0)
+}
+
+/// An angle in degrees from text: a finite number within ±`limit` (`what` names it).
+fn degrees(t: &str, what: &str, limit: f64) -> std::result::Result<f64, String> {
+    let v = t
+        .trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("not a finite number: {t:?}"))?;
+    if v.abs() <= limit {
         Ok(v)
     } else {
         Err(format!(
-            "an elevation must lie in [-90, 90] degrees, got {v}"
+            "{what} must lie in [-{limit}, {limit}] degrees, got {v}"
         ))
     }
-}
-
-/// [`azimuth`] from text.
-pub(crate) fn azimuth_arg(s: &str) -> std::result::Result<f64, String> {
-    s.trim()
-        .parse::<f64>()
-        .map_err(|e| format!("{s:?}: {e}"))
-        .and_then(azimuth)
-}
-
-/// [`elevation`] from text.
-pub(crate) fn elevation_arg(s: &str) -> std::result::Result<f64, String> {
-    s.trim()
-        .parse::<f64>()
-        .map_err(|e| format!("{s:?}: {e}"))
-        .and_then(elevation)
 }
 
 /// "AxB" as two numbers (`what` names them in the error).

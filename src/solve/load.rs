@@ -95,10 +95,15 @@ pub(super) fn load_inspected(
     };
     let mut skipped = vec![];
     let proj = projection(&report, &mut skipped);
-    let detections_path = detections_location(opts, &report, &now);
     let t1 = Instant::now();
-    let (detections, decoded) =
-        detections(opts, (&report, &sess), &now, &detections_path, &mut skipped)?;
+    let (detections_path, reuse) = detections_location(opts, &report, &now);
+    let (detections, decoded) = detections(
+        (&report, &sess),
+        &now,
+        (&detections_path, reuse),
+        opts.quiet,
+        &mut skipped,
+    )?;
     timings.detect_s = t1.elapsed().as_secs_f64();
     let mut inputs = now;
     inputs.insert(
@@ -251,39 +256,47 @@ fn projection(report: &SessionReport, skipped: &mut Vec<String>) -> Projection {
 /// — when `--out` puts the fit in another folder and the session's cannot be reused — one beside
 /// the fit, so that nothing is written into the session folder and a read-only dataset can be
 /// solved (issue 33).
-fn detections_location(opts: &Options, report: &SessionReport, now: &Inputs) -> PathBuf {
-    let in_session = report.session_file.with_file_name("detections.json");
-    let Some(out) = &opts.out else {
-        return in_session;
+/// Returns the path with whether its detections.json can be reused (or why not).
+fn detections_location(
+    opts: &Options,
+    report: &SessionReport,
+    now: &Inputs,
+) -> (PathBuf, std::result::Result<Detections, String>) {
+    let verdict = |p: &Path| {
+        if opts.redetect {
+            Err("--redetect".to_string())
+        } else {
+            reusable(p, report, now)
+        }
     };
-    let beside = out.with_file_name("detections.json");
+    let in_session = report.session_file.with_file_name("detections.json");
     let folder = |p: &Path| {
         let dir = p.parent().unwrap_or(Path::new("."));
         std::fs::canonicalize(dir)
             .unwrap_or_else(|_| std::path::absolute(dir).unwrap_or(dir.into()))
     };
-    let reuse_session = !opts.redetect && reusable(&in_session, report, now).is_ok();
-    if reuse_session || folder(&beside) == folder(&in_session) {
-        in_session
+    let beside = match &opts.out {
+        Some(out) => out.with_file_name("detections.json"),
+        None => in_session.clone(),
+    };
+    let in_session_verdict = verdict(&in_session);
+    if in_session_verdict.is_ok() || folder(&beside) == folder(&in_session) {
+        (in_session, in_session_verdict)
     } else {
-        beside
+        let v = verdict(&beside);
+        (beside, v)
     }
 }
 
-/// detections.json reused when its inputs are unchanged (and not `--redetect`), else detection
-/// run; said in `skipped`.
+/// detections.json reused when [`detections_location`] found it reusable, else detection run
+/// into that place; said in `skipped`.
 fn detections(
-    opts: &Options,
     (report, sess): (&SessionReport, &Session),
     now: &Inputs,
-    detections_path: &Path,
+    (detections_path, reuse): (&Path, std::result::Result<Detections, String>),
+    quiet: bool,
     skipped: &mut Vec<String>,
 ) -> Result<(Detections, Option<Decoded>)> {
-    let reuse = if opts.redetect {
-        Err("--redetect".to_string())
-    } else {
-        reusable(detections_path, report, now)
-    };
     Ok(match reuse {
         Ok(d) => {
             skipped.push("detection: detections.json reused (its inputs unchanged)".into());
@@ -298,7 +311,7 @@ fn detections(
                     session: report.session_file.clone(),
                     out: Some(detections_path.to_path_buf()),
                     overlays: true,
-                    quiet: opts.quiet,
+                    quiet,
                 },
                 (report, sess),
                 &decoded,

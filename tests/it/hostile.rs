@@ -647,6 +647,19 @@ fn table_and_render_options_out_of_range() {
     let stem = stem.to_str().unwrap();
     let obj = crate::view::torus_obj(tmp.path());
     let out = tmp.path().join("r.png");
+    let (obj, out_s) = (obj.to_str().unwrap(), out.to_str().unwrap());
+    let render = |size| {
+        vec![
+            "render",
+            obj,
+            "--fit",
+            fit,
+            "--out",
+            out_s,
+            "--object-size",
+            size,
+        ]
+    };
     for (args, needle) in [
         (
             vec!["lut", fit, "--out", stem, "--kappa-max", "1e300"],
@@ -669,32 +682,8 @@ fn table_and_render_options_out_of_range() {
             ],
             "2..2049",
         ),
-        (
-            vec![
-                "render",
-                obj.to_str().unwrap(),
-                "--fit",
-                fit,
-                "--out",
-                out.to_str().unwrap(),
-                "--object-size",
-                "1e300",
-            ],
-            "--object-size must lie",
-        ),
-        (
-            vec![
-                "render",
-                obj.to_str().unwrap(),
-                "--fit",
-                fit,
-                "--out",
-                out.to_str().unwrap(),
-                "--object-size",
-                "1e-300",
-            ],
-            "--object-size must lie",
-        ),
+        (render("1e300"), "--object-size must lie"),
+        (render("1e-300"), "--object-size must lie"),
     ] {
         let (code, err) = wb_within(120, &args);
         assert_ne!(code, 0, "{args:?}");
