@@ -21,8 +21,7 @@ pub(crate) fn clean_up_on_signals() {
         std::thread::spawn(move || {
             let mut sig: libc::c_int = 0;
             if libc::sigwait(&set, &mut sig) == 0 {
-                workbench::formats::output::discard_temporaries();
-                std::process::exit(128 + sig);
+                workbench::formats::output::exit_discarding_temporaries(128 + sig);
             }
         });
     }

@@ -38,21 +38,25 @@ static OPEN: Mutex<Vec<Open>> = Mutex::new(Vec::new());
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 /// Every temporary this process has created and not yet renamed into place: what an interrupted
-/// run deletes on its way out ([`discard_temporaries`]).
+/// run deletes on its way out ([`exit_discarding_temporaries`]).
 static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 fn live() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
     LIVE.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Delete every temporary not yet renamed into place, for a run stopped by SIGINT or SIGTERM
-/// (the binary's signal thread calls it before exiting; issue 33: `plot` and `lut` left
+/// Delete every temporary not yet renamed into place and exit with `code`, for a run stopped by
+/// SIGINT or SIGTERM (the binary's signal thread calls it; issue 33: `plot` and `lut` left
 /// `.workbench-*.tmp` files). The previous outputs stay as they were: nothing was renamed over
-/// them. A file already renamed or deleted is skipped.
-pub fn discard_temporaries() {
-    for p in live().drain(..) {
+/// them. A file already renamed or deleted is skipped. The list stays locked until the process
+/// has gone, so a thread still writing cannot create a temporary after the clean-up: temporaries
+/// are created under the same lock ([`write_atomic`]).
+pub fn exit_discarding_temporaries(code: i32) -> ! {
+    let mut live = live();
+    for p in live.drain(..) {
         let _ = std::fs::remove_file(p);
     }
+    std::process::exit(code)
 }
 
 fn open_sets() -> std::sync::MutexGuard<'static, Vec<Open>> {
@@ -203,12 +207,17 @@ where
     replaceable(path, false)?;
     let dir = parent(path);
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".workbench-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(dir, e))?;
-    live().push(tmp.path().to_path_buf());
+    // Created and listed under one lock, so that an interrupted run finds every temporary.
+    let mut tmp = {
+        let mut live = live();
+        let tmp = tempfile::Builder::new()
+            .prefix(".workbench-")
+            .suffix(".tmp")
+            .tempfile_in(dir)
+            .map_err(|e| Error::io(dir, e))?;
+        live.push(tmp.path().to_path_buf());
+        tmp
+    };
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         write(&mut w).map_err(|e| Error::io(path, e))?;
