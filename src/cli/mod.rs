@@ -476,6 +476,20 @@ pub(crate) struct SessionArgs {
     /// Hold each sphere up on a thin matte pin under it.
     #[arg(long)]
     pub(crate) stand: bool,
+    /// The pin's radius in mm (with --stand).
+    #[arg(long, default_value_t = workbench::synth::session::PIN_RADIUS_MM, requires = "stand")]
+    pub(crate) stand_radius: f64,
+    /// The pin at a constant value (fraction of full scale) instead of lit by the session's light
+    /// (with --stand).
+    #[arg(long, requires = "stand")]
+    pub(crate) stand_level: Option<f64>,
+    /// A pin under every n-th sphere of --radii, starting with the first (with --stand).
+    #[arg(long, default_value_t = 1, requires = "stand")]
+    pub(crate) stand_every: usize,
+    /// How far in mm the pin reaches up in front of the sphere's lower rim, hiding it (0: behind
+    /// the rim; with --stand).
+    #[arg(long, default_value_t = 0.0, requires = "stand")]
+    pub(crate) stand_contact: f64,
     #[command(flatten)]
     pub(crate) camera: CameraArgs,
     #[command(flatten)]

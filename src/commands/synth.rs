@@ -7,7 +7,7 @@ use std::fmt;
 use std::path::PathBuf;
 use workbench::model::{Material, SpecularParams};
 use workbench::synth::checkerboard::{self, BoardFormat, CheckerConfig};
-use workbench::synth::session::{self, Backdrop, Format, Layout, SessionConfig};
+use workbench::synth::session::{self, Backdrop, Format, Layout, SessionConfig, Stand};
 use workbench::synth::volpath;
 
 pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<SessionWritten> {
@@ -23,6 +23,27 @@ pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<SessionWritte
             a.kernel_ratio
         );
     }
+    if !(a.stand_radius > 0.0 && a.stand_radius <= 1e3) {
+        bail!(
+            "--stand-radius must lie in (0, 1000] mm, got {}",
+            a.stand_radius
+        );
+    }
+    if a.stand_level.is_some_and(|v| !(0.0..=1.0).contains(&v)) {
+        bail!(
+            "--stand-level must lie in [0, 1], got {}",
+            a.stand_level.unwrap_or_default()
+        );
+    }
+    if !(0.0..=1e3).contains(&a.stand_contact) {
+        bail!(
+            "--stand-contact must lie in [0, 1000] mm, got {}",
+            a.stand_contact
+        );
+    }
+    if a.stand_every == 0 {
+        bail!("--stand-every must be 1 or more");
+    }
     let cfg = SessionConfig {
         radii_mm: a.radii,
         layout: match a.layout {
@@ -34,7 +55,12 @@ pub(crate) fn synth_session(a: SessionArgs, quiet: bool) -> Result<SessionWritte
             BackdropArg::Grey => Backdrop::Grey,
             BackdropArg::Table => Backdrop::Table,
         },
-        stand: a.stand,
+        stand: a.stand.then_some(Stand {
+            radius_mm: a.stand_radius,
+            level: a.stand_level,
+            every: a.stand_every,
+            contact_mm: a.stand_contact,
+        }),
         camera: a.camera.camera()?,
         light: a.light.angles(),
         material: Material {

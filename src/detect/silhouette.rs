@@ -310,8 +310,11 @@ pub struct Refined {
     pub sectors_used: usize,
     /// Weighted RMS residual of the edge model (image units).
     pub rms: f64,
-    /// 1-σ uncertainty of the outline's centre and radius (px), from σ²(JᵀWJ)⁻¹ at the solution.
+    /// 1-σ uncertainty of the outline's centre and radius (px): the diagonal of `cov`.
     pub std_px: [f64; 3],
+    /// The covariance of the outline's three parameters (units of [`Outline::moved`]): the larger
+    /// (by trace) of σ²(JᵀWJ)⁻¹ at the solution and the arcs' jackknife ([`arc_jackknife`]).
+    pub cov: Matrix3<f64>,
     pub iterations: usize,
 }
 
@@ -587,12 +590,14 @@ type V4 = nalgebra::Vector4<f64>;
 type M4 = nalgebra::Matrix4<f64>;
 
 /// Where the edge model's fit ended: the parameters (the outline's three, moved from the start,
-/// and v = blur² in px²), the residuals, the weighted cost, JᵀWJ at the last point, iterations.
+/// and v = blur² in px²), the residuals, the weighted cost, JᵀWJ and the Jacobian's columns at
+/// the last point where they were taken (the end, or one short step before it), iterations.
 struct BandFit {
     x: V4,
     res: Vec<f64>,
     cost: f64,
     jtj: M4,
+    cols: [Vec<f64>; 4],
     iterations: usize,
 }
 
@@ -630,37 +635,12 @@ fn fit_band(
     };
     let mut iterations = 0;
     let mut jtj = M4::zeros();
+    let mut cols: [Vec<f64>; 4] = Default::default();
     for it in 0..25 {
         iterations = it + 1;
-        let cols: Vec<Vec<f64>> = (0..4)
-            .map(|k| {
-                let mut d = V4::zeros();
-                d[k] = steps[k];
-                let mut lo = x - d;
-                let mut span = 2.0 * steps[k];
-                if k == 3 && lo[3] < 0.0 {
-                    // One-sided at the blur's lower bound.
-                    lo = x;
-                    span = steps[k];
-                }
-                let (rp, _) = eval(&(x + d));
-                let (rm, _) = eval(&lo);
-                rp.iter().zip(&rm).map(|(a, b)| (a - b) / span).collect()
-            })
-            .collect();
-        jtj = M4::zeros();
-        let mut jtr = V4::zeros();
-        for i in 0..band.len() {
-            if !res[i].is_finite() || wpix[i] == 0.0 {
-                continue;
-            }
-            let j = V4::new(cols[0][i], cols[1][i], cols[2][i], cols[3][i]);
-            if !j.iter().all(|v| v.is_finite()) {
-                continue;
-            }
-            jtj += wpix[i] * j * j.transpose();
-            jtr += wpix[i] * j * res[i];
-        }
+        cols = jacobian(&eval, &x, &steps);
+        let jtr;
+        (jtj, jtr) = normal_equations(&cols, &res, wpix, |_| true);
         // Never move more than 2 px, nor the blur by more than 1 px², in one step.
         let accepted = lm.step(&jtj, &jtr, c, |step| {
             let geo_norm = Vector3::new(step[0], step[1], step[2]).norm();
@@ -688,8 +668,93 @@ fn fit_band(
         res,
         cost: c,
         jtj,
+        cols,
         iterations,
     }
+}
+
+/// The residuals' derivatives in the four parameters at `x` by central differences of `steps`
+/// (one-sided at the blur's lower bound), one column a parameter.
+fn jacobian(eval: &impl Fn(&V4) -> (Vec<f64>, f64), x: &V4, steps: &V4) -> [Vec<f64>; 4] {
+    std::array::from_fn(|k| {
+        let mut d = V4::zeros();
+        d[k] = steps[k];
+        let mut lo = x - d;
+        let mut span = 2.0 * steps[k];
+        if k == 3 && lo[3] < 0.0 {
+            lo = *x;
+            span = steps[k];
+        }
+        let (rp, _) = eval(&(x + d));
+        let (rm, _) = eval(&lo);
+        rp.iter().zip(&rm).map(|(a, b)| (a - b) / span).collect()
+    })
+}
+
+/// JᵀWJ and JᵀWr over the band pixels `keep` selects (finite residual and derivatives, weight
+/// above 0).
+fn normal_equations(
+    cols: &[Vec<f64>; 4],
+    res: &[f64],
+    wpix: &[f64],
+    keep: impl Fn(usize) -> bool,
+) -> (M4, V4) {
+    let mut jtj = M4::zeros();
+    let mut jtr = V4::zeros();
+    for i in 0..res.len() {
+        if !res[i].is_finite() || wpix[i] == 0.0 || !keep(i) {
+            continue;
+        }
+        let j = V4::new(cols[0][i], cols[1][i], cols[2][i], cols[3][i]);
+        if !j.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        jtj += wpix[i] * j * j.transpose();
+        jtr += wpix[i] * j * res[i];
+    }
+    (jtj, jtr)
+}
+
+/// Arcs of the rim the outline's jackknife leaves out in turn.
+const ARCS: usize = 8;
+
+/// The outline's jackknife over [`ARCS`] arcs of the rim: the fit without each arc in turn, by one
+/// Gauss–Newton step on the normal equations less that arc's part, and the estimates' spread,
+/// widened by t(n − 1)/2 as the radii's jackknife is (src/fit/joint/jackknife.rs). Whatever
+/// disturbs part of the rim — a stand or pin, a backdrop's edge, a shadow, an occluder, a
+/// composited background — moves the arcs' outlines apart, which the noise-only error
+/// σ²(JᵀWJ)⁻¹ cannot see. The covariance of the outline's three parameters (units of
+/// [`Outline::moved`]); `None` with fewer than 4 arcs carrying weight.
+fn arc_jackknife(
+    band: &[BandPixel],
+    nsec: usize,
+    cols: &[Vec<f64>; 4],
+    res: &[f64],
+    wpix: &[f64],
+) -> Option<Matrix3<f64>> {
+    let arc = |i: usize| (band[i].sector % nsec) * ARCS / nsec;
+    let (h, b) = normal_equations(cols, res, wpix, |_| true);
+    let estimates: Vec<Vector3<f64>> = (0..ARCS)
+        .filter_map(|g| {
+            let (hg, bg) = normal_equations(cols, res, wpix, |i| arc(i) == g);
+            if hg.trace() <= 0.0 {
+                return None;
+            }
+            let step = -(h - hg).try_inverse()? * (b - bg);
+            Some(Vector3::new(step[0], step[1], step[2]))
+        })
+        .collect();
+    let n = estimates.len();
+    if n < 4 {
+        return None;
+    }
+    let mean = estimates.iter().sum::<Vector3<f64>>() / n as f64;
+    let widen = crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, n as u32 - 1) / 2.0;
+    let scatter: Matrix3<f64> = estimates
+        .iter()
+        .map(|e| (e - mean) * (e - mean).transpose())
+        .sum();
+    Some(scatter * ((n - 1) as f64 / n as f64) * widen * widen)
 }
 
 /// Refine an outline with the edge model on a band `inner_px` inside to `outer_px` outside the
@@ -736,6 +801,7 @@ pub(crate) fn refine(
         res,
         cost: c,
         jtj,
+        cols,
         iterations,
     } = fit_band(start, &band, sectors, (r_px, unit), &wpix);
     let m = res.iter().filter(|r| r.is_finite()).count();
@@ -747,10 +813,19 @@ pub(crate) fn refine(
         .sum();
     // σ² = cost / (m − n); cov = σ² (JᵀWJ)⁻¹ (outline block).
     let sigma2 = c / (m.saturating_sub(4 + NLIN * sectors_used).max(1)) as f64;
-    let cov = jtj.try_inverse().map(|mi| mi * sigma2);
-    let std_px = cov
-        .map(|cv| [0, 1, 2].map(|k| cv[(k, k)].max(0.0).sqrt() / unit))
-        .unwrap_or([f64::NAN; 3]);
+    let formal = jtj
+        .try_inverse()
+        .map(|mi| mi * sigma2)
+        .map(|cv| cv.fixed_view::<3, 3>(0, 0).into_owned());
+    // The larger of the noise's error and the arcs' disagreement (by trace; each is a full
+    // covariance, carried to the light by the highlight).
+    let arcs = arc_jackknife(&band, nsec, &cols, &res, &wpix);
+    let cov = match (formal, arcs) {
+        (Some(f), Some(a)) if a.trace() > f.trace() => a,
+        (Some(f), _) => f,
+        (None, _) => Matrix3::from_element(f64::NAN),
+    };
+    let std_px = [0, 1, 2].map(|k| cov[(k, k)].max(0.0).sqrt() / unit);
     Some(Refined {
         outline: start.moved(&Vector3::new(x[0], x[1], x[2])),
         blur_px: x[3].max(0.0).sqrt(),
@@ -758,6 +833,7 @@ pub(crate) fn refine(
         sectors_used,
         rms: (c / wsum.max(1e-300)).sqrt(),
         std_px,
+        cov,
         iterations,
     })
 }

@@ -450,18 +450,21 @@ impl PhotoSamples<'_> {
             self.light,
             self.highlight_radius,
         );
+        // Less the floor, then over the photo's light intensity (session.json), per channel.
         let floor_rgb = self.floor.unwrap_or([0.0; 3]);
+        let intensity = info.light_intensity;
         for x in smp.iter_mut() {
-            for (v, f) in x.radiance.iter_mut().zip(&floor_rgb) {
-                *v -= f;
+            for c in 0..3 {
+                x.radiance[c] = (x.radiance[c] - floor_rgb[c]) / intensity[c];
             }
         }
         // The smallest σ: half a level step (a noise-free render).
-        let floor = 0.5 / ((1u32 << img.bits.min(16)) as f64) / exposure;
+        let brightest = intensity.iter().cloned().fold(f64::INFINITY, f64::max);
+        let floor = 0.5 / ((1u32 << img.bits.min(16)) as f64) / exposure / brightest;
         let model = noise_model(&smp, floor);
         let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
         // Full scale (pixel value 1) in the samples' units.
-        let full_scale = [0, 1, 2].map(|c| 1.0 / exposure - floor_rgb[c]);
+        let full_scale = [0, 1, 2].map(|c| (1.0 / exposure - floor_rgb[c]) / intensity[c]);
         let noise = {
             let mut lv: Vec<f64> = smp.iter().map(|x| x.radiance[1]).collect();
             lv.sort_by(|a, b| a.total_cmp(b));

@@ -97,6 +97,18 @@ pub struct KernelJson {
     pub ratio: f64,
 }
 
+/// A standard error more than this many times its value (or 1, whichever is larger) is not a
+/// measurement: the data do not bound the parameter (an opaque ball's σ0 at the edge of its
+/// range gave 1.1e32 mm). fit.json writes it as `null` with a reason, the summary as
+/// `unbounded`.
+pub const UNBOUNDED_RATIO: f64 = 1e6;
+
+/// Whether a standard error says the data do not bound the value ([`UNBOUNDED_RATIO`]; an
+/// infinite one too).
+pub fn unbounded(value: f64, std: f64) -> bool {
+    std == f64::INFINITY || (std.is_finite() && std > UNBOUNDED_RATIO * value.abs().max(1.0))
+}
+
 /// One parameter, flat.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ParamJson {
@@ -116,6 +128,9 @@ pub struct ParamJson {
     /// factor, docs/uncertainty.md; absent when 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior_tension: Option<f64>,
+    /// Why `std` is `null` where the data do not bound the parameter ([`unbounded`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_note: Option<String>,
     /// "fitted", "fixed", "prior …", "off: …".
     pub status: String,
 }

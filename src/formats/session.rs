@@ -45,6 +45,11 @@ pub struct SessionImage {
     /// Relative exposure (see [`crate::formats::exif`]); overrides EXIF.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure: Option<f64>,
+    /// The light's intensity in this photo per channel (r, g, b), relative to the session's
+    /// other photos: a photometric-stereo set's lamps differ (DiLiGenT's
+    /// `light_intensities.txt`). The photo's radiance is divided by it, as by the exposure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_intensity: Option<[f64; 3]>,
     /// Whether pixel values are linear; default: 16-bit/float linear, 8-bit sRGB.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub linear: Option<bool>,
@@ -169,6 +174,17 @@ impl Session {
                     ));
                 }
             }
+            if let Some(l) = im.light_intensity {
+                if let Some(v) = l
+                    .iter()
+                    .find(|v| !(v.is_finite() && **v > 1e-9 && **v < 1e9))
+                {
+                    return bad(format!(
+                        "images[{i}] ({}): light_intensity must lie between 1e-9 and 1e9 in each channel, got {v:e}",
+                        im.file
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -232,6 +248,9 @@ pub struct ImageInfo {
     /// Relative exposure, and where it came from ("session.json" or "EXIF").
     pub exposure: Option<f64>,
     pub exposure_source: Option<&'static str>,
+    /// The light's relative intensity per channel in this photo (1, 1, 1 unless session.json
+    /// gives it).
+    pub light_intensity: [f64; 3],
     /// What the EXIF reader lost, substituted or ignored, one line each.
     pub exif_notes: Vec<String>,
     pub linear: bool,
@@ -403,6 +422,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             channels,
             exposure: im.exposure,
             exposure_source: im.exposure.map(|_| "session.json"),
+            light_intensity: im.light_intensity.unwrap_or([1.0; 3]),
             exif_notes: exif.as_ref().map(|e| e.notes.clone()).unwrap_or_default(),
             linear: im.linear.unwrap_or(bits > 8),
             radii_mm: im.spheres.iter().map(|s| s.radius_mm).collect(),

@@ -193,32 +193,49 @@ fn image_lights(l: &Loaded, l_dir: &nalgebra::Vector3<f64>) -> Vec<ImageLightJso
 }
 
 /// The stated standard errors, the light's as one angle.
+/// A standard error as fit.json states it: infinite (written `null`) where the data do not bound
+/// the parameter ([`unbounded`]).
+fn bounded(value: f64, std: f64) -> f64 {
+    if unbounded(value, std) {
+        f64::INFINITY
+    } else {
+        std
+    }
+}
+
+/// Each parameter's stated standard error as fit.json writes it ([`bounded`]).
+fn stated_std(outcome: &Outcome) -> [f64; N_PARAMS] {
+    let v = outcome.params.to_vec();
+    std::array::from_fn(|k| bounded(v[k], outcome.std[k]))
+}
+
 fn std_json(outcome: &Outcome) -> StdJson {
     let p = &outcome.params;
-    let light_deg = (outcome.std[idx::AZIMUTH].powi(2) * p.light.elevation.cos().powi(2)
-        + outcome.std[idx::ELEVATION].powi(2))
+    let std = stated_std(outcome);
+    let light_deg = (std[idx::AZIMUTH].powi(2) * p.light.elevation.cos().powi(2)
+        + std[idx::ELEVATION].powi(2))
     .sqrt()
     .to_degrees();
     StdJson {
-        sigma0_mm: [outcome.std[0], outcome.std[1], outcome.std[2]],
-        albedo: [outcome.std[3], outcome.std[4], outcome.std[5]],
-        eta: outcome.std[idx::ETA],
+        sigma0_mm: [std[0], std[1], std[2]],
+        albedo: [std[3], std[4], std[5]],
+        eta: std[idx::ETA],
         specular: outcome.specular.then_some(SpecularJson {
-            ks: outcome.std[idx::KS],
-            alpha: outcome.std[idx::ALPHA],
+            ks: std[idx::KS],
+            alpha: std[idx::ALPHA],
         }),
         light_deg,
         sigma_exponent: outcome
             .extensions
             .sigma_exponent
-            .then_some(outcome.std[idx::SIGMA_EXPONENT]),
+            .then_some(std[idx::SIGMA_EXPONENT]),
         albedo_curvature: outcome
             .extensions
             .albedo_curvature
-            .then_some(outcome.std[idx::ALBEDO_CURVATURE]),
+            .then_some(std[idx::ALBEDO_CURVATURE]),
         kernel: outcome.extensions.two_gaussian.then_some(KernelJson {
-            weight: outcome.std[idx::KERNEL_WEIGHT],
-            ratio: outcome.std[idx::KERNEL_RATIO],
+            weight: std[idx::KERNEL_WEIGHT],
+            ratio: std[idx::KERNEL_RATIO],
         }),
     }
 }
@@ -226,14 +243,24 @@ fn std_json(outcome: &Outcome) -> StdJson {
 /// Every parameter with its value, errors and status.
 fn parameters(outcome: &Outcome) -> Vec<ParamJson> {
     let p = &outcome.params;
+    let v = p.to_vec();
     (0..N_PARAMS)
         .map(|k| ParamJson {
             name: PARAM_NAMES[k].into(),
-            value: p.to_vec()[k],
-            std: outcome.std[k],
-            std_formal: outcome.jackknife.as_ref().map(|_| outcome.std_formal[k]),
-            std_jackknife: outcome.jackknife.as_ref().map(|j| j.std[k]),
+            value: v[k],
+            std: bounded(v[k], outcome.std[k]),
+            std_formal: outcome
+                .jackknife
+                .as_ref()
+                .map(|_| bounded(v[k], outcome.std_formal[k])),
+            std_jackknife: outcome.jackknife.as_ref().map(|j| bounded(v[k], j.std[k])),
             prior_tension: (outcome.prior_tension[k] > 1.0).then_some(outcome.prior_tension[k]),
+            std_note: unbounded(v[k], outcome.std[k]).then(|| {
+                format!(
+                    "unbounded: the data do not bound {} (its standard error came out above {UNBOUNDED_RATIO:e} times its value)",
+                    PARAM_NAMES[k]
+                )
+            }),
             status: outcome.status[k].clone(),
         })
         .collect()

@@ -27,18 +27,25 @@ fn status(f: &FitFile, name: &str) -> String {
         .unwrap_or_default()
 }
 
+/// A value and its standard error, to `digits` decimals: `± unbounded` where the data do not
+/// bound it (fit.json's `null` with a reason; [`unbounded`]), `± not determined` for a failed
+/// fit's.
+fn pm(v: f64, e: f64, digits: usize) -> String {
+    if unbounded(v, e) {
+        format!("{v:.digits$} ± unbounded")
+    } else if e.is_nan() {
+        format!("{v:.digits$} ± not determined")
+    } else {
+        format!("{v:.digits$} ± {e:.digits$}")
+    }
+}
+
 /// Three channels' values with their errors, to `digits` decimals.
 fn rgb(v: &[f64; 3], e: &[f64; 3], digits: usize) -> String {
-    format!(
-        "{:.d$} ± {:.d$}, {:.d$} ± {:.d$}, {:.d$} ± {:.d$}",
-        v[0],
-        e[0],
-        v[1],
-        e[1],
-        v[2],
-        e[2],
-        d = digits
-    )
+    (0..3)
+        .map(|c| pm(v[c], e[c], digits))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The method, σ0, the albedo, η and the lobe.
@@ -62,21 +69,18 @@ fn material(f: &FitFile) -> String {
     let _ = writeln!(s, "albedo   {}", rgb(&f.albedo, &f.std.albedo, 4));
     let _ = writeln!(
         s,
-        "eta      {:.4} ± {:.4}  [{}]",
-        f.eta,
-        f.std.eta,
+        "eta      {}  [{}]",
+        pm(f.eta, f.std.eta, 4),
         status(f, "eta")
     );
     match (&f.specular, &f.std.specular) {
         (Some(sp), Some(e)) => {
             let _ = writeln!(
                 s,
-                "specular ks {:.4} ± {:.4} [{}], alpha {:.4} ± {:.4} [{}]",
-                sp.ks,
-                e.ks,
+                "specular ks {} [{}], alpha {} [{}]",
+                pm(sp.ks, e.ks, 4),
                 status(f, "ks"),
-                sp.alpha,
-                e.alpha,
+                pm(sp.alpha, e.alpha, 4),
                 status(f, "alpha")
             );
         }
@@ -129,21 +133,24 @@ fn extensions(f: &FitFile) -> String {
     if let (Some(q), Some(e)) = (f.sigma_exponent, f.std.sigma_exponent) {
         let _ = writeln!(
             s,
-            "extension sigma_exponent q = {q:.4} ± {e:.4} (r_ref {} mm)",
+            "extension sigma_exponent q = {} (r_ref {} mm)",
+            pm(q, e, 4),
             f.reference_radius_mm
         );
     }
     if let (Some(k), Some(e)) = (f.kernel, f.std.kernel) {
         let _ = writeln!(
             s,
-            "kernel   two Gaussians: weight {:.4} ± {:.4} in a tail {:.3} ± {:.3} times wider",
-            k.weight, e.weight, k.ratio, e.ratio
+            "kernel   two Gaussians: weight {} in a tail {} times wider",
+            pm(k.weight, e.weight, 4),
+            pm(k.ratio, e.ratio, 3)
         );
     }
     if let (Some(b), Some(e)) = (f.albedo_curvature, f.std.albedo_curvature) {
         let _ = writeln!(
             s,
-            "extension albedo_curvature b = {b:.4} ± {e:.4} (r_ref {} mm)",
+            "extension albedo_curvature b = {} (r_ref {} mm)",
+            pm(b, e, 4),
             f.reference_radius_mm
         );
     }
@@ -288,4 +295,20 @@ fn time(f: &FitFile) -> String {
         }
     );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pm;
+
+    #[test]
+    fn unbounded_and_undetermined_errors_are_said_in_words() {
+        assert_eq!(pm(1.25, 0.5, 2), "1.25 ± 0.50");
+        // An opaque ball's σ0 (issue 34): 1.1e32 mm was printed as a number.
+        assert_eq!(pm(0.0012, 1.08e32, 4), "0.0012 ± unbounded");
+        assert_eq!(pm(0.5, f64::INFINITY, 1), "0.5 ± unbounded");
+        assert_eq!(pm(0.5, f64::NAN, 1), "0.5 ± not determined");
+        // Large but bounded: a value of 1000 ± 1e8 is below 1e6 times its value.
+        assert_eq!(pm(1000.0, 1e8, 0), "1000 ± 100000000");
+    }
 }

@@ -58,24 +58,68 @@ pub enum Backdrop {
 /// The table's diffuse albedo (π·radiance / irradiance) and the wall's level behind it.
 pub(crate) const TABLE_ALBEDO: f64 = 0.3;
 pub(crate) const WALL_LEVEL: f64 = 0.10;
-/// The stand's pin radius (mm).
-pub(crate) const PIN_RADIUS_MM: f64 = 1.5;
+/// The stand's default pin radius (mm).
+pub const PIN_RADIUS_MM: f64 = 1.5;
 
-/// The nearest hit of a camera ray `d` on a sphere's pin (a vertical cylinder under it): the
-/// distance and the pin's outward normal there.
-fn pin_hit(r: f64, s: &Sphere, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
-    let c = s.center;
+/// The pins that hold the spheres up (`--stand`): each a vertical cylinder under its sphere, from
+/// inside the sphere's bottom down three sphere radii; it casts no shadow.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stand {
+    /// The pin's radius (mm).
+    pub radius_mm: f64,
+    /// A constant pixel value (fraction of full scale), as a pin lit from
+    /// its own lamp or painted bright would show; without it the pin is matte (albedo 0.5) under
+    /// the session's light.
+    pub level: Option<f64>,
+    /// A pin under every n-th sphere of the radii list (1: every sphere, 2: every other one,
+    /// starting with the first).
+    pub every: usize,
+    /// How far (mm) the pin reaches up in front of the sphere's lower rim, hiding it: 0 for a pin
+    /// under the sphere's middle, behind its rim; above 0 the pin stands a sphere radius nearer
+    /// the camera (a prong holding the sphere from the front) and its top is this far above the
+    /// sphere's lowest point.
+    #[serde(default)]
+    pub contact_mm: f64,
+}
+
+impl Default for Stand {
+    fn default() -> Self {
+        Stand {
+            radius_mm: PIN_RADIUS_MM,
+            level: None,
+            every: 1,
+            contact_mm: 0.0,
+        }
+    }
+}
+
+/// The nearest hit of a camera ray `d` on a sphere's pin (a vertical cylinder under it, see
+/// [`Stand`]): the distance and the pin's outward normal there.
+fn pin_hit(r: f64, s: &Sphere, stand: &Stand, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+    let pin = stand.radius_mm;
+    let front = stand.contact_mm > 0.0;
+    let mut c = s.center;
+    if front {
+        // The axis a sphere radius nearer the camera, along the horizontal line of sight.
+        let toward = Vector3::new(c.x, 0.0, c.z).normalize();
+        c -= toward * r;
+    }
+    let top = if front {
+        s.center.y + r - stand.contact_mm
+    } else {
+        s.center.y + 0.9 * r
+    };
     let a = d.x * d.x + d.z * d.z;
     let b = -2.0 * (d.x * c.x + d.z * c.z);
-    let cc = c.x * c.x + c.z * c.z - PIN_RADIUS_MM * PIN_RADIUS_MM;
+    let cc = c.x * c.x + c.z * c.z - pin * pin;
     let disc = b * b - 4.0 * a * cc;
     if a <= 0.0 || disc < 0.0 {
         return None;
     }
     let t = (-b - disc.sqrt()) / (2.0 * a);
     let p = d * t;
-    // From inside the sphere's bottom down three radii.
-    (t > 0.0 && p.y > c.y + 0.9 * r && p.y < c.y + r + 3.0 * r)
+    // From its top (inside the sphere's bottom, or in front of its rim) down three radii.
+    (t > 0.0 && p.y > top && p.y < s.center.y + r + 3.0 * r)
         .then(|| (t, Vector3::new(p.x - c.x, 0.0, p.z - c.z).normalize()))
 }
 
@@ -103,10 +147,9 @@ pub struct SessionConfig {
     /// What lies behind and under the spheres.
     #[serde(default)]
     pub backdrop: Backdrop,
-    /// Each sphere held up by a thin matte pin under it (radius [`PIN_RADIUS_MM`], albedo 0.5, three
-    /// sphere radii long, lit by the same light; it casts no shadow).
+    /// Spheres held up by thin pins under them ([`Stand`]).
     #[serde(default)]
-    pub stand: bool,
+    pub stand: Option<Stand>,
     /// Edge supersampling: n×n samples per silhouette pixel.
     pub supersample: u32,
     pub format: Format,
@@ -157,7 +200,7 @@ impl Default for SessionConfig {
             read_noise: 5e-4,
             ambient: 2e-3,
             backdrop: Backdrop::Black,
-            stand: false,
+            stand: None,
             supersample: 4,
             format: Format::Png16,
             jpeg_quality: 95,
@@ -229,6 +272,9 @@ pub struct RenderTruth {
     pub backdrop: Backdrop,
     #[serde(default)]
     pub stand: bool,
+    /// The pins' size, level and spacing, where there are pins.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stand_pins: Option<Stand>,
 }
 
 /// One image of the session: its file name and spheres (left to right).
@@ -425,15 +471,22 @@ fn shade(
             }
         }
     }
-    if cfg.stand {
+    if let Some(stand) = cfg.stand {
+        let held = |r: f64| {
+            let k = cfg.radii_mm.iter().position(|&x| x == r).unwrap_or(0);
+            k % stand.every.max(1) == 0
+        };
         let pin = spheres
             .iter()
-            .filter_map(|(r, s)| pin_hit(*r, s, d))
+            .filter(|(r, _)| held(*r))
+            .filter_map(|(r, s)| pin_hit(*r, s, &stand, d))
             .min_by(|a, b| a.0.total_cmp(&b.0));
         if let Some((t, n)) = pin {
             if best.is_none_or(|(bt, _)| t < bt) {
-                let lit = n.dot(&cfg.light.direction()).max(0.0);
-                return [cfg.exposure * 0.5 * lit + cfg.ambient; 3];
+                let value = stand
+                    .level
+                    .unwrap_or_else(|| cfg.exposure * 0.5 * n.dot(&cfg.light.direction()).max(0.0));
+                return [value + cfg.ambient; 3];
             }
         }
     }
@@ -523,7 +576,7 @@ pub fn render_linear(cfg: &SessionConfig, spheres: &[(f64, Sphere)]) -> Vec<f64>
     img.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let yf = y as f64;
         let everywhere = [[0.0, yf, (w - 1) as f64, yf]];
-        let boxes: &[[f64; 4]] = if cfg.backdrop == Backdrop::Black && !cfg.stand {
+        let boxes: &[[f64; 4]] = if cfg.backdrop == Backdrop::Black && cfg.stand.is_none() {
             &boxes
         } else {
             &everywhere
@@ -621,6 +674,7 @@ pub fn generate(
         images.push(path);
         truth_images.push(truth_image(cfg, p));
         session_images.push(SessionImage {
+            light_intensity: None,
             file: p.file.clone(),
             spheres: p
                 .spheres
@@ -759,7 +813,8 @@ fn session_truth(cfg: &SessionConfig, images: Vec<TruthImage>) -> SessionTruth {
             seed: cfg.seed,
             layout: cfg.layout,
             backdrop: cfg.backdrop,
-            stand: cfg.stand,
+            stand: cfg.stand.is_some(),
+            stand_pins: cfg.stand,
         },
     }
 }

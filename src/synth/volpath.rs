@@ -470,6 +470,7 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
         images: photos
             .iter()
             .map(|p| SessionImage {
+                light_intensity: None,
                 file: p.file.clone(),
                 spheres: vec![SessionSphere::new(p.radius_mm)],
                 exposure: None,

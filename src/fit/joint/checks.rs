@@ -94,6 +94,38 @@ pub(crate) fn alpha_from_detector(
     (fitted - detected).abs()
 }
 
+/// A light beside the camera: θ ≈ φ on every pixel, and the blur and the exit transmission trade
+/// off. Each sphere's photo is looked at (its mean view against the light, in its photo's frame:
+/// a per-image-light session turns each photo's geometry under the shared light); the note comes
+/// only when every photo's light is within [`NEAR_VIEW_DEG`] of its view, since one photo lit from
+/// the side shows a terminator that fixes σ0.
+fn light_beside_the_camera(fit: &Fit, spheres: &[&SphereData]) -> Option<String> {
+    let light = fit.params.light.direction();
+    let angles: Vec<f64> = spheres
+        .iter()
+        .filter_map(|s| {
+            let view: Vector3<f64> = s.obs.iter().map(|o| o.geometry.view).sum();
+            (view.norm() > 0.0).then(|| light.angle(&view).to_degrees())
+        })
+        .collect();
+    let widest = angles.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    if angles.is_empty() || widest >= NEAR_VIEW_DEG {
+        return None;
+    }
+    let what = if angles.len() > 1 {
+        let narrowest = angles.iter().cloned().fold(f64::INFINITY, f64::min);
+        format!(
+            "for every one of the {} spheres the light is {narrowest:.1}–{widest:.1}° from the camera's direction",
+            angles.len()
+        )
+    } else {
+        format!("the light is {widest:.1}° from the camera's direction")
+    };
+    Some(format!(
+        "{what}: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
+    ))
+}
+
 /// What the fit's residuals and geometry say about it: the residuals against the measured noise
 /// (returned as χ²/dof), a light beside the camera, and η against its prior. Returns χ²/dof and
 /// the notes.
@@ -117,20 +149,7 @@ pub(crate) fn fit_notes(
             chi2.sqrt()
         ));
     }
-    // A light beside the camera: θ ≈ φ everywhere, the blur and the exit transmission trade off.
-    let view: Vector3<f64> = spheres
-        .iter()
-        .filter_map(|s| s.obs.first())
-        .map(|o| o.geometry.view)
-        .sum();
-    if view.norm() > 0.0 {
-        let a = fit.params.light.direction().angle(&view).to_degrees();
-        if a < NEAR_VIEW_DEG {
-            notes.push(format!(
-                "the light is {a:.1}° from the camera's direction: no terminator in view and θ ≈ φ on every pixel, so σ0 rests on the fall-off at the rim, where it trades off with the exit transmission T(φ; η) — expect σ0 off by 10% or more; light the spheres from the side"
-            ));
-        }
-    }
+    notes.extend(light_beside_the_camera(fit, spheres));
     let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;
     if eta_status.starts_with("prior") && tension > 3.0 {
         notes.push(format!(
