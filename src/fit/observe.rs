@@ -459,7 +459,7 @@ impl PhotoSamples<'_> {
             }
         }
         // The smallest σ: half a level step (a noise-free render).
-        let brightest = intensity.iter().cloned().fold(f64::INFINITY, f64::max);
+        let brightest = intensity.iter().cloned().fold(0.0, f64::max);
         let floor = 0.5 / ((1u32 << img.bits.min(16)) as f64) / exposure / brightest;
         let model = noise_model(&smp, floor);
         let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
