@@ -799,3 +799,58 @@ fn a_photos_light_intensity_divides_its_radiance() {
     assert!(apart(&given) < 1.8, "{}", apart(&given));
     assert!(apart(&ignored) > 20.0, "{}", apart(&ignored));
 }
+
+/// DiLiGenT's glossy ball as a whole solve (issue 34): 48 real photos, one light per photo, each
+/// photo's lamp intensity from the dataset's `light_intensities.txt`, radius 20 mm, no intrinsics.
+/// Checked: the fit converges, the lobe is fitted, σ0 is the small blur of an opaque ball, the
+/// solved lights against DiLiGenT's calibrated directions, and the residuals against the noise
+/// said in a note.
+#[test]
+fn diligent_ball_whole_solve() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (_, truth) = common::diligent_session_with(&data.join("diligent-ball"), dir.path(), true);
+    let f = solve_with(dir.path(), "fit.json", |o| o.quiet = true);
+    let errs: Vec<f64> = f
+        .image_lights
+        .iter()
+        .zip(&truth)
+        .map(|(il, t)| {
+            Vector3::from(il.direction)
+                .angle(&Vector3::from(*t))
+                .to_degrees()
+        })
+        .collect();
+    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+    let max = errs.iter().cloned().fold(0.0, f64::max);
+    let spec = f.specular.expect("the lobe is fitted");
+    let chi = f.convergence.chi2_per_dof.expect("χ²/dof").sqrt();
+    let status = |name: &str| {
+        f.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.status.clone())
+            .unwrap()
+    };
+    println!(
+        "DiLiGenT ball, whole solve: converged {}, lights mean {mean:.3}° max {max:.3}° from the calibrated ones ({}), ks {:.4}, α {:.4}, σ0 {:?} mm, residuals {chi:.2}× the noise, {:.1} s",
+        f.convergence.converged, f.light_fit, spec.ks, spec.alpha, f.sigma0_mm, f.timings.total_s
+    );
+    assert!(f.convergence.converged);
+    assert_eq!(errs.len(), 48);
+    // Measured: mean 0.615°, max 1.16° (the detector's lights, held: the shading pulled the
+    // shared correction 14 of its errors). The issue's goal is 0.5°: not reached.
+    assert!(mean < 0.7 && max < 1.5, "mean {mean}° max {max}°");
+    // Measured α 0.0525 ± 0.0032, ks 0.111.
+    assert!((0.035..0.075).contains(&spec.alpha), "α {}", spec.alpha);
+    assert_eq!(status("alpha"), "fitted");
+    // An opaque ball: a blur of a few pixels' angle at most (measured 0.56, 0.24, 0.16 mm; the
+    // two smaller reported as upper bounds).
+    assert!(f.sigma0_mm.iter().all(|&s| s < 1.0), "{:?}", f.sigma0_mm);
+    assert!(status("sigma0_b").starts_with("upper bound"));
+    // Residuals 2.2× the noise (measured): above 1.5, so a note must say the model falls short.
+    assert!(chi > 1.5 && chi < 3.5, "{chi}");
+    assert!(f.notes.iter().any(|n| n.contains("× the measured noise")));
+}

@@ -166,6 +166,16 @@ pub fn diligent_session(
     ball: &std::path::Path,
     dir: &std::path::Path,
 ) -> (Vec<String>, Vec<[f64; 3]>) {
+    diligent_session_with(ball, dir, false)
+}
+
+/// [`diligent_session`], with each photo's `light_intensity` from the dataset's
+/// `light_intensities.txt` where `intensities`.
+pub fn diligent_session_with(
+    ball: &std::path::Path,
+    dir: &std::path::Path,
+    intensities: bool,
+) -> (Vec<String>, Vec<[f64; 3]>) {
     let lines = |f: &str| -> Vec<String> {
         std::fs::read_to_string(ball.join(f))
             .unwrap()
@@ -187,12 +197,19 @@ pub fn diligent_session(
         let from = std::fs::canonicalize(ball.join(n)).unwrap();
         std::os::unix::fs::symlink(from, dir.join(n)).unwrap();
     }
+    let numbers =
+        |l: &String| -> Vec<f64> { l.split_whitespace().map(|t| t.parse().unwrap()).collect() };
+    let lamps: Vec<Vec<f64>> = lines("light_intensities.txt").iter().map(numbers).collect();
     let session = serde_json::json!({
         "schema": "workbench.session/1",
         "light": "per-image",
-        "images": names.iter().map(|n| serde_json::json!({
-            "file": n, "spheres": [{"radius_mm": 20.0}]
-        })).collect::<Vec<_>>()
+        "images": names.iter().zip(&lamps).map(|(n, i)| {
+            let mut im = serde_json::json!({"file": n, "spheres": [{"radius_mm": 20.0}]});
+            if intensities {
+                im["light_intensity"] = serde_json::json!(i);
+            }
+            im
+        }).collect::<Vec<_>>()
     });
     std::fs::write(dir.join("session.json"), session.to_string()).unwrap();
     (names, truth)
