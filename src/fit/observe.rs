@@ -452,7 +452,7 @@ impl PhotoSamples<'_> {
         );
         // Less the floor, then over the photo's light intensity (session.json), per channel.
         let floor_rgb = self.floor.unwrap_or([0.0; 3]);
-        let intensity = info.light_intensity;
+        let intensity = info.light_intensity.unwrap_or([1.0; 3]);
         for x in smp.iter_mut() {
             for c in 0..3 {
                 x.radiance[c] = (x.radiance[c] - floor_rgb[c]) / intensity[c];

@@ -646,6 +646,13 @@ pub struct ImageLightJson {
     pub azimuth_deg: f64,
     #[serde(deserialize_with = "nullable::f64")]
     pub elevation_deg: f64,
+    /// The lamp's relative intensity per channel: session.json's, or fitted (geometric mean 1
+    /// per channel) where the session gives none; absent in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intensity: Option<[f64; 3]>,
+    /// "session.json" or "fitted".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intensity_source: Option<String>,
 }
 
 /// One stage's convergence record.

@@ -248,9 +248,8 @@ pub struct ImageInfo {
     /// Relative exposure, and where it came from ("session.json" or "EXIF").
     pub exposure: Option<f64>,
     pub exposure_source: Option<&'static str>,
-    /// The light's relative intensity per channel in this photo (1, 1, 1 unless session.json
-    /// gives it).
-    pub light_intensity: [f64; 3],
+    /// The light's relative intensity per channel in this photo, where session.json gives it.
+    pub light_intensity: Option<[f64; 3]>,
     /// What the EXIF reader lost, substituted or ignored, one line each.
     pub exif_notes: Vec<String>,
     pub linear: bool,
@@ -422,7 +421,7 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
             channels,
             exposure: im.exposure,
             exposure_source: im.exposure.map(|_| "session.json"),
-            light_intensity: im.light_intensity.unwrap_or([1.0; 3]),
+            light_intensity: im.light_intensity,
             exif_notes: exif.as_ref().map(|e| e.notes.clone()).unwrap_or_default(),
             linear: im.linear.unwrap_or(bits > 8),
             radii_mm: im.spheres.iter().map(|s| s.radius_mm).collect(),

@@ -182,11 +182,24 @@ fn image_lights(l: &Loaded, l_dir: &nalgebra::Vector3<f64>) -> Vec<ImageLightJso
         .map(|(r, im)| {
             let d = r.inverse() * l_dir;
             let a = LightAngles::from_direction(&d);
+            let fitted = l.intensities.as_ref().and_then(|f| {
+                f.photos
+                    .iter()
+                    .find(|(file, _)| *file == im.file)
+                    .map(|(_, k)| *k)
+            });
+            let (intensity, source) = match (im.light_intensity, fitted) {
+                (Some(k), _) => (Some(k), Some("session.json".to_string())),
+                (None, Some(k)) => (Some(k), Some("fitted".to_string())),
+                (None, None) => (None, None),
+            };
             ImageLightJson {
                 file: im.file.clone(),
                 direction: [d.x, d.y, d.z],
                 azimuth_deg: a.azimuth.to_degrees(),
                 elevation_deg: a.elevation.to_degrees(),
+                intensity,
+                intensity_source: source,
             }
         })
         .collect()

@@ -29,6 +29,9 @@ pub struct Loaded {
     pub measured: Measured,
     /// Under `"light": "per-image"`: each photo's rotation onto the common light frame.
     pub frames: Option<Vec<nalgebra::Rotation3<f64>>>,
+    /// Under `"light": "per-image"` without intensities in session.json: each photo's lamp
+    /// intensity as fitted ([`crate::fit::joint::intensity`]), its observations divided by it.
+    pub intensities: Option<crate::fit::joint::intensity::PhotoIntensities>,
     pub skipped: Vec<String>,
     pub timings: Timings,
     /// What the fit is made from: the session's input files and detections.json, by content.
@@ -162,6 +165,7 @@ pub(super) fn load_inspected(
         spheres: obs.spheres,
         measured,
         frames,
+        intensities: None,
         skipped,
         timings,
         inputs,

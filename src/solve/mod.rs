@@ -74,6 +74,9 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
     let mut notes: Vec<String> = unfitted_floor_note(opts, &l).into_iter().collect();
     let t_solve = Instant::now();
+    if opts.method == Method::Joint {
+        fit_intensities(opts, &mut l, is_held);
+    }
     let mut outcome = {
         let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
         match opts.method {
@@ -170,4 +173,38 @@ fn unfitted_floor_note(opts: &Options, l: &Loaded) -> Option<String> {
     ));
     }
     None
+}
+
+/// Under `"light": "per-image"` with no photo's `light_intensity` in session.json: each photo's
+/// lamp intensity fitted and divided out ([`crate::fit::joint::intensity`]), said in `skipped`.
+fn fit_intensities(opts: &Options, l: &mut Loaded, is_held: impl Fn(&SphereData) -> bool) {
+    let given = l.report.images.iter().any(|i| i.light_intensity.is_some());
+    if l.frames.is_none() || given {
+        return;
+    }
+    let fitted = joint::intensity::fit_photo_intensities(
+        &opts.fit_settings(),
+        &l.measured,
+        &mut l.spheres,
+        |s| !is_held(s),
+    );
+    let range = |c: usize| {
+        fitted
+            .photos
+            .iter()
+            .map(|(_, k)| k[c])
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let (lo, hi) = (0..3)
+        .map(range)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), (x, y)| {
+            (a.min(x), b.max(y))
+        });
+    l.skipped.push(format!(
+        "light intensities: none in session.json, one per photo and channel fitted ({:.3}–{:.3} of their geometric mean, {} rounds, last move {:.1e}); their errors are not in the material's",
+        lo, hi, fitted.rounds, fitted.last_move
+    ));
+    l.intensities = Some(fitted);
 }

@@ -21,6 +21,8 @@
 //! - [`checks`]: what the result's residuals and geometry say about it, as notes;
 //! - [`choice`]: the extensions chosen by held-out error; [`jackknife`]: the leave-one-radius-out
 //!   spread; [`baseline`]: the paper's procedure beside the fit;
+//! - [`intensity`]: one lamp intensity per photo and channel, fitted where a session with one
+//!   light per photo gives none;
 //! - [`hold`]: the light held at the detector's where the shading pulls it too far;
 //! - [`newton`]: Newton steps from a fit to the fit of a changed problem (a radius left out, the
 //!   light held), for the jackknife and the light's hold;
@@ -31,6 +33,7 @@ pub mod checks;
 pub mod choice;
 pub mod hold;
 pub mod identify;
+pub mod intensity;
 pub mod jackknife;
 pub mod light;
 pub mod newton;
