@@ -113,9 +113,15 @@ fn light(f: &FitFile) -> String {
         );
     }
     for il in &f.image_lights {
+        let lamp = match (il.intensity, il.intensity_source.as_deref()) {
+            (Some(k), Some(from)) => {
+                format!(", lamp {:.3}, {:.3}, {:.3} ({from})", k[0], k[1], k[2])
+            }
+            _ => String::new(),
+        };
         let _ = writeln!(
             s,
-            "light    {:<12} [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°)",
+            "light    {:<12} [{:+.5}, {:+.5}, {:+.5}] (az {:.3}°, el {:.3}°){lamp}",
             il.file,
             il.direction[0],
             il.direction[1],

@@ -146,17 +146,15 @@ fn photo_scales(
 /// noise and the floor divided by k, the weights (1/σ) multiplied.
 fn scale_sphere(s: &mut SphereData, k: &[f64; 3]) {
     for o in s.obs.iter_mut() {
-        for c in 0..3 {
-            o.radiance[c] /= k[c];
-            o.weight[c] *= k[c];
-        }
+        o.radiance = std::array::from_fn(|c| o.radiance[c] / k[c]);
+        o.weight = std::array::from_fn(|c| o.weight[c] * k[c]);
     }
-    for c in 0..3 {
-        s.noise[c] /= k[c];
-        // σ² = a + b·L: with L and σ over k, a over k² and b over k.
-        s.noise_model[c][0] /= k[c] * k[c];
-        s.noise_model[c][1] /= k[c];
-    }
+    s.noise = std::array::from_fn(|c| s.noise[c] / k[c]);
+    // σ² = a + b·L: with L and σ over k, a over k² and b over k.
+    s.noise_model = std::array::from_fn(|c| {
+        let [a, b] = s.noise_model[c];
+        [a / (k[c] * k[c]), b / k[c]]
+    });
     if let Some(f) = s.floor.as_mut() {
         (0..3).for_each(|c| f[c] /= k[c]);
     }
