@@ -871,6 +871,13 @@ fn diligent_ball_whole_solve() {
     // Residuals 2.2× the noise (measured): above 1.5, so a note must say the model falls short.
     assert!(chi > 1.5 && chi < 3.5, "{chi}");
     assert!(f.notes.iter().any(|n| n.contains("× the measured noise")));
+    // And where: at the highlight (measured 15.2× the noise there, 2.2× on the lit side), a
+    // glossy paint's peak that one GGX lobe does not follow.
+    assert!(
+        f.notes.iter().any(|n| n.contains("worst at the highlight")),
+        "{:?}",
+        f.notes
+    );
 }
 
 /// A per-image-light session whose lamps differ and are not given (issue 34: DiLiGenT without

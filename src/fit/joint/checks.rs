@@ -127,9 +127,11 @@ fn light_beside_the_camera(fit: &Fit, spheres: &[&SphereData]) -> Option<String>
 }
 
 /// What the fit's residuals and geometry say about it: the residuals against the measured noise
-/// (returned as χ²/dof), a light beside the camera, and η against its prior. Returns χ²/dof and
+/// (returned as χ²/dof) and, above [`CHI2_WARN`], where they lie ([`super::regions`]), a light
+/// beside the camera, and η against its prior. Returns χ²/dof and
 /// the notes.
 pub(crate) fn fit_notes(
+    model: &crate::model::Model,
     fit: &Fit,
     spheres: &[&SphereData],
     (eta_mean, eta_std): (f64, f64),
@@ -148,6 +150,7 @@ pub(crate) fn fit_notes(
             "the residuals are {:.1}× the measured noise (χ²/dof = {chi2:.1}): the model does not describe these photos fully — check the detections (light, outlines); a wrong light or outline biases σ0",
             chi2.sqrt()
         ));
+        notes.extend(super::regions::worst_region(model, fit, spheres));
     }
     notes.extend(light_beside_the_camera(fit, spheres));
     let tension = (fit.params.material.eta - eta_mean).abs() / eta_std;

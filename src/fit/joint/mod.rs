@@ -18,7 +18,8 @@
 //! - [`identify`]: parameters whose standard error is not finite or larger than their plausible
 //!   range are held at their prior (η, α) or switched off (ks, the extensions) and the fit
 //!   repeated; σ0 beyond what the data resolve is a bound;
-//! - [`checks`]: what the result's residuals and geometry say about it, as notes;
+//! - [`checks`]: what the result's residuals and geometry say about it, as notes; [`regions`]:
+//!   where the residuals lie when they are above the noise;
 //! - [`choice`]: the extensions chosen by held-out error; [`jackknife`]: the leave-one-radius-out
 //!   spread; [`baseline`]: the paper's procedure beside the fit;
 //! - [`intensity`]: one lamp intensity per photo and channel, fitted where a session with one
@@ -38,6 +39,7 @@ pub mod jackknife;
 pub mod light;
 pub mod newton;
 pub mod reduction;
+pub mod regions;
 pub mod session;
 pub mod settings;
 pub mod stages;

@@ -213,7 +213,13 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     );
     notes.extend(checks::clipped(spheres));
     let fit = degenerate_check(fit, &mut stages, &mut notes);
-    let (chi2, quality) = fit_notes(&fit, spheres, setup.settings.eta_prior, &status[idx::ETA]);
+    let (chi2, quality) = fit_notes(
+        &model,
+        &fit,
+        spheres,
+        setup.settings.eta_prior,
+        &status[idx::ETA],
+    );
     notes.extend(quality);
     let light_pull = light.pull(setup, &fit, free[idx::AZIMUTH], &mut notes);
     for k in 0..N_PARAMS {
