@@ -186,6 +186,19 @@ impl Session {
                 }
             }
         }
+        let lamps = self
+            .images
+            .iter()
+            .filter(|im| im.light_intensity.is_some())
+            .count();
+        // One lamp per photo: all given, or none (then each is fitted). Under one light a photo
+        // without it keeps the lamp at 1.
+        if self.light == LightMode::PerImage && lamps != 0 && lamps != self.images.len() {
+            return bad(format!(
+                "light_intensity for {lamps} of the {} photos: with \"light\": \"per-image\" give it for all or none (none: each photo's is fitted)",
+                self.images.len()
+            ));
+        }
         Ok(())
     }
 

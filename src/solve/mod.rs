@@ -188,20 +188,10 @@ fn fit_intensities(opts: &Options, l: &mut Loaded, is_held: impl Fn(&SphereData)
         &mut l.spheres,
         |s| !is_held(s),
     );
-    let range = |c: usize| {
-        fitted
-            .photos
-            .iter()
-            .map(|(_, k)| k[c])
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(v), b.max(v))
-            })
-    };
-    let (lo, hi) = (0..3)
-        .map(range)
-        .fold((f64::INFINITY, 0.0f64), |(a, b), (x, y)| {
-            (a.min(x), b.max(y))
-        });
+    let all = fitted.photos.iter().flat_map(|(_, k)| k.iter().copied());
+    let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
     l.skipped.push(format!(
         "light intensities: none in session.json, one per photo and channel fitted ({:.3}–{:.3} of their geometric mean, {} rounds, last move {:.1e}); their errors are not in the material's",
         lo, hi, fitted.rounds, fitted.last_move

@@ -21,6 +21,11 @@ fn truth(dir: &Path) -> SessionTruth {
     serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap()
 }
 
+/// How far a detected outline's centre lies from the true one (px).
+fn centre_off(detected: [f64; 2], truth: [f64; 2]) -> f64 {
+    (Vector2::from(detected) - Vector2::from(truth)).norm()
+}
+
 fn angle_deg(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     Vector3::from(*a).angle(&Vector3::from(*b)).to_degrees()
 }
@@ -485,8 +490,7 @@ fn grey_backdrop_and_table() {
         let t = truth(dir.path());
         for (im, ti) in d.images.iter().zip(&t.images) {
             let (s, ts) = (&im.spheres[0], &ti.spheres[0]);
-            let dc =
-                (Vector2::from(s.ellipse.center_px) - Vector2::from(ts.ellipse.center_px)).norm();
+            let dc = centre_off(s.ellipse.center_px, ts.ellipse.center_px);
             let da = (s.ellipse.axes_px[0] - ts.ellipse.axes_px[0]).abs();
             println!("{backdrop} {}: centre {dc:.3} px, axis {da:.3} px", im.file);
             // Measured ≤ 0.043 px.
@@ -578,8 +582,7 @@ fn outline_centres_are_within_their_stated_errors() {
         let t = truth(dir.path());
         for (im, ti) in d.images.iter().zip(&t.images) {
             let (s, ts) = (&im.spheres[0], &ti.spheres[0]);
-            let dc =
-                (Vector2::from(s.ellipse.center_px) - Vector2::from(ts.ellipse.center_px)).norm();
+            let dc = centre_off(s.ellipse.center_px, ts.ellipse.center_px);
             let std = s.silhouette_std_px[0].hypot(s.silhouette_std_px[1]);
             println!(
                 "seed {seed} {}: centre {dc:.3} px, stated ± {std:.3} px",

@@ -270,6 +270,28 @@ fn bad_session_json() {
             "exposure must lie between",
         ),
         (
+            "zero-lamp",
+            Box::new(|s: String| {
+                let mut v: serde_json::Value = serde_json::from_str(&s).unwrap();
+                v["images"][0]["light_intensity"] = serde_json::json!([1.0, 0.0, 1.0]);
+                v.to_string()
+            }),
+            "light_intensity must lie between",
+        ),
+        (
+            "some-lamps",
+            Box::new(|s: String| {
+                let mut v: serde_json::Value = serde_json::from_str(&s).unwrap();
+                v["light"] = "per-image".into();
+                let mut other = v["images"][0].clone();
+                other["file"] = "r20-again.png".into();
+                v["images"].as_array_mut().unwrap().push(other);
+                v["images"][0]["light_intensity"] = serde_json::json!([1.0, 0.9, 0.8]);
+                v.to_string()
+            }),
+            "give it for all or none",
+        ),
+        (
             "escape",
             Box::new(|s: String| s.replace("\"r20.png\"", "\"../other/r20.png\"")),
             "outside the session folder",
