@@ -640,7 +640,7 @@ fn fit_band(
         iterations = it + 1;
         cols = jacobian(&eval, &x, &steps);
         let jtr;
-        (jtj, jtr) = normal_equations(&cols, &res, wpix, |_| true);
+        (jtj, jtr) = normal_equations(&cols, &res, wpix, (1, |_| 0))[0];
         // Never move more than 2 px, nor the blur by more than 1 px², in one step.
         let accepted = lm.step(&jtj, &jtr, c, |step| {
             let geo_norm = Vector3::new(step[0], step[1], step[2]).norm();
@@ -691,28 +691,28 @@ fn jacobian(eval: &impl Fn(&V4) -> (Vec<f64>, f64), x: &V4, steps: &V4) -> [Vec<
     })
 }
 
-/// JᵀWJ and JᵀWr over the band pixels `keep` selects (finite residual and derivatives, weight
-/// above 0).
+/// JᵀWJ and JᵀWr of each of `groups` groups of band pixels (`group` of a pixel's index), in
+/// one pass over the band: pixels with a finite residual and derivatives and a weight above 0.
 fn normal_equations(
     cols: &[Vec<f64>; 4],
     res: &[f64],
     wpix: &[f64],
-    keep: impl Fn(usize) -> bool,
-) -> (M4, V4) {
-    let mut jtj = M4::zeros();
-    let mut jtr = V4::zeros();
+    (groups, group): (usize, impl Fn(usize) -> usize),
+) -> Vec<(M4, V4)> {
+    let mut sums = vec![(M4::zeros(), V4::zeros()); groups];
     for i in 0..res.len() {
-        if !res[i].is_finite() || wpix[i] == 0.0 || !keep(i) {
+        if !res[i].is_finite() || wpix[i] == 0.0 {
             continue;
         }
         let j = V4::new(cols[0][i], cols[1][i], cols[2][i], cols[3][i]);
         if !j.iter().all(|v| v.is_finite()) {
             continue;
         }
-        jtj += wpix[i] * j * j.transpose();
-        jtr += wpix[i] * j * res[i];
+        let (jtj, jtr) = &mut sums[group(i)];
+        *jtj += wpix[i] * j * j.transpose();
+        *jtr += wpix[i] * j * res[i];
     }
-    (jtj, jtr)
+    sums
 }
 
 /// Arcs of the rim the outline's jackknife leaves out in turn.
@@ -732,14 +732,21 @@ fn arc_jackknife(
     res: &[f64],
     wpix: &[f64],
 ) -> Option<Matrix3<f64>> {
-    let arc = |i: usize| (band[i].sector % nsec) * ARCS / nsec;
-    let (h, b) = normal_equations(cols, res, wpix, |_| true);
-    let estimates: Vec<Vector3<f64>> = (0..ARCS)
-        .filter_map(|g| {
-            let (hg, bg) = normal_equations(cols, res, wpix, |i| arc(i) == g);
-            if hg.trace() <= 0.0 {
-                return None;
-            }
+    let arcs = normal_equations(
+        cols,
+        res,
+        wpix,
+        (ARCS, |i| (band[i].sector % nsec) * ARCS / nsec),
+    );
+    let (h, b) = arcs
+        .iter()
+        .fold((M4::zeros(), V4::zeros()), |(h, b), (hg, bg)| {
+            (h + hg, b + bg)
+        });
+    let estimates: Vec<Vector3<f64>> = arcs
+        .iter()
+        .filter(|(hg, _)| hg.trace() > 0.0)
+        .filter_map(|(hg, bg)| {
             let step = -(h - hg).try_inverse()? * (b - bg);
             Some(Vector3::new(step[0], step[1], step[2]))
         })
@@ -817,8 +824,8 @@ pub(crate) fn refine(
         .try_inverse()
         .map(|mi| mi * sigma2)
         .map(|cv| cv.fixed_view::<3, 3>(0, 0).into_owned());
-    // The larger of the noise's error and the arcs' disagreement (by trace; each is a full
-    // covariance, carried to the light by the highlight).
+    // The larger of the noise's error and the arcs' disagreement (by trace; each a full
+    // covariance of the outline's three parameters).
     let arcs = arc_jackknife(&band, nsec, &cols, &res, &wpix);
     let cov = match (formal, arcs) {
         (Some(f), Some(a)) if a.trace() > f.trace() => a,

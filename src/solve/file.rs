@@ -205,7 +205,6 @@ fn image_lights(l: &Loaded, l_dir: &nalgebra::Vector3<f64>) -> Vec<ImageLightJso
         .collect()
 }
 
-/// The stated standard errors, the light's as one angle.
 /// A standard error as fit.json states it: infinite (written `null`) where the data do not bound
 /// the parameter ([`unbounded`]).
 fn bounded(value: f64, std: f64) -> f64 {
@@ -222,6 +221,7 @@ fn stated_std(outcome: &Outcome) -> [f64; N_PARAMS] {
     std::array::from_fn(|k| bounded(v[k], outcome.std[k]))
 }
 
+/// The stated standard errors, the light's as one angle.
 fn std_json(outcome: &Outcome) -> StdJson {
     let p = &outcome.params;
     let std = stated_std(outcome);

@@ -155,10 +155,10 @@ fn held_from_the_fit(
     }
     let mut held = jf.clone();
     // The quality notes and χ² of the held fit replace those of the fit with the light free.
-    let (_, before) = fit_notes(&jf.model, &jf.fit, fitted, eta_prior, &jf.status[idx::ETA]);
-    held.notes.retain(|n| !before.contains(n));
+    held.notes.retain(|n| !jf.quality.contains(n));
     let (chi2, after) = fit_notes(&jf.model, &fit, fitted, eta_prior, &jf.status[idx::ETA]);
-    held.notes.extend(after);
+    held.notes.extend(after.iter().cloned());
+    held.quality = after;
     held.chi2_dof = chi2;
     // So does α's check against the detector's (η's needs the pooled pixels: it stays).
     let mut before = vec![];

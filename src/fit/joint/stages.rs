@@ -80,6 +80,8 @@ pub struct JointFit {
     pub problem: FinalProblem,
     /// σ0 was checked against the limits of what the data resolve ([`JointFit::check_resolution`]).
     pub resolution_checked: bool,
+    /// The notes of [`checks::fit_notes`] among `notes` (what a held light's fit replaces).
+    pub quality: Vec<String>,
 }
 
 impl JointFit {
@@ -220,7 +222,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
         setup.settings.eta_prior,
         &status[idx::ETA],
     );
-    notes.extend(quality);
+    notes.extend(quality.iter().cloned());
     let light_pull = light.pull(setup, &fit, free[idx::AZIMUTH], &mut notes);
     for k in 0..N_PARAMS {
         if !free[k] && status[k] == "fitted" {
@@ -260,6 +262,7 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
             priors: fit_priors,
         },
         resolution_checked: false,
+        quality,
     };
     if setup.checks {
         jf.check_resolution(setup, spheres);
