@@ -33,7 +33,7 @@ ints = [[float(t) for t in l] for l in lines("light_intensities.txt")]
 for n in names:
     os.symlink(os.path.join(ball, n), os.path.join(d, n))
 json.dump({"schema": "workbench.session/1", "light": "per-image",
-           "images": [{"file": n, "exposure": sum(i) / 3, "spheres": [{"radius_mm": 20.0}]}
+           "images": [{"file": n, "light_intensity": i, "spheres": [{"radius_mm": 20.0}]}
                       for n, i in zip(names, ints)]},
           open(os.path.join(d, "session.json"), "w"))
 PY
