@@ -684,6 +684,32 @@ impl Problem<'_> {
 }
 
 impl Problem<'_> {
+    /// How the optimum of every other free parameter follows the free parameters `given` when
+    /// those are held elsewhere, at the current parameters on the observation rows of `raw`
+    /// (with the priors; the floor profiled out): the rows of −H_oo⁻¹ H_og (unbounded units),
+    /// each with its parameter's index. `None` where a `given` is not free or H_oo is singular.
+    pub fn follows(&self, raw: &RawNormal, given: &[usize]) -> Option<Vec<(usize, Vec<f64>)>> {
+        let free = self.free_idx();
+        let g: Vec<usize> = given
+            .iter()
+            .map(|k| free.iter().position(|f| f == k))
+            .collect::<Option<_>>()?;
+        let others: Vec<usize> = (0..free.len()).filter(|i| !g.contains(i)).collect();
+        let h = self.profiled(raw).jtj;
+        let hoo = h.select_rows(&others).select_columns(&others);
+        let hog = h.select_rows(&others).select_columns(&g);
+        let slopes = -(hoo.try_inverse()? * hog);
+        Some(
+            others
+                .iter()
+                .enumerate()
+                .map(|(r, &i)| (free[i], slopes.row(r).iter().copied().collect()))
+                .collect(),
+        )
+    }
+}
+
+impl Problem<'_> {
     /// The Gauss–Newton step from the current parameters on the observation rows of `raw` (with
     /// the priors; the floor profiled out): the unbounded parameters after it, and the dark floor
     /// it implies (the floor's own step, f = −(wᵀr + wᵀJ·δ)/(wᵀw); 0 when the floor is known).

@@ -1,10 +1,9 @@
-//! The light held at the detector's where the shading pulls it too far ([`hold_pulled_light`]):
-//! the held fit by Newton steps from the fit with the light free ([`held_from_the_fit`]); the
-//! whole fit repeated only where those do not settle.
+//! A joint fit with its light held at a given direction ([`hold_at`]): by Newton steps from the
+//! fit with the light free ([`held_from_the_fit`]); the whole fit repeated only where those do
+//! not settle.
 
 use super::checks::{alpha_from_detector, fit_notes};
 use super::identify::{poorly_determined, prior_tension};
-use super::light::PULL_WARN;
 use super::newton;
 use super::settings::{Extensions, LightFit, Measured, Settings, Setup};
 use super::stages::{fit_joint, FinalProblem, JointFit};
@@ -12,81 +11,22 @@ use crate::fit::observe::SphereData;
 use crate::fit::solver::{from_unbounded, to_unbounded, Fit};
 use crate::model::{idx, LightAngles, Params, N_PARAMS};
 
-/// The fit after the light's hold, the settings it ran with, and the light's systematic.
-pub(crate) struct Held {
-    pub fit: JointFit,
-    pub settings: Settings,
-    /// Per parameter, the light's systematic on it (0 where none).
-    pub light_shift: [f64; N_PARAMS],
-    /// The shading pulled the light beyond [`PULL_WARN`].
-    pub pulled: bool,
-}
-
-/// A light pulled beyond [`PULL_WARN`] of the detector's errors is pulled by the model's error,
-/// not supported by the data: it is held at the detector's and the fit repeated from the fit's
-/// final stage ([`held_from_the_fit`]) or, where that fails, in full. Each parameter's
-/// shift between the two fits is the light's systematic on it and joins its std; a light taken
-/// from the detector keeps the detector's error (docs/uncertainty.md, "When the shading pulls the
-/// light").
-pub(crate) fn hold_pulled_light(
-    settings: &Settings,
-    measured: &Measured,
+/// The fit `jf` with its light held at `light` ([`held_from_the_fit`]), or, where those Newton
+/// steps do not settle, the whole fit repeated with the light held there (`settings` has
+/// [`LightFit::Hold`] and `start_light` at `light`).
+pub(crate) fn hold_at(
+    jf: &JointFit,
+    light: LightAngles,
+    (settings, measured, ext): (&Settings, &Measured, Extensions),
     fitted: &[&SphereData],
-    ext: Extensions,
-    first: JointFit,
-    notes: &mut Vec<String>,
-) -> Held {
-    let mut jf = first;
-    let mut fit_settings = *settings;
-    let mut light_shift = [0.0; N_PARAMS];
-    let pulled = jf.light_pull.filter(|p| p.pull > PULL_WARN);
-    if let (LightFit::Prior, Some(pull), Some(_)) = (settings.light_fit, pulled, measured.light) {
-        fit_settings.light_fit = LightFit::Hold;
-        let light = LightAngles::from_direction(&measured.light.expect("matched above"));
-        let held = held_from_the_fit(&jf, light, fitted, measured, settings.eta_prior)
-            .unwrap_or_else(|| {
-                fit_joint(
-                    &Setup::new(&fit_settings, measured, ext, settings.reduction),
-                    fitted,
-                )
-            });
-        let (a, b) = (jf.fit.params.to_vec(), held.fit.params.to_vec());
-        light_shift = std::array::from_fn(|k| {
-            if held.fit.free[k] {
-                (a[k] - b[k]).abs()
-            } else {
-                0.0
-            }
-        });
-        let moved_sigma0: Vec<String> = (0..3)
-            .map(|c| format!("{:.3}", jf.fit.params.material.sigma0_mm[c]))
-            .collect();
-        notes.push(format!(
-            "the light is held at the highlights' estimate: the shading pulled it {:.1} of its errors, further than the data support; with the pulled light σ0 was {} mm, and each parameter's shift between the two fits joins its std",
-            pull.pull,
-            moved_sigma0.join(", ")
-        ));
-        jf = JointFit {
-            light_pull: Some(pull),
-            ..held
-        };
-        let why = format!("held: the detector's (pulled {:.1} std)", pull.pull);
-        jf.status[idx::AZIMUTH] = why.clone();
-        jf.status[idx::ELEVATION] = why;
-    }
-    if fit_settings.light_fit == LightFit::Hold && settings.start_light.is_none() {
-        if let (Some(s), Some(d)) = (measured.light_std, measured.light) {
-            let el = LightAngles::from_direction(&d).elevation;
-            light_shift[idx::AZIMUTH] = s / el.cos().abs().max(1e-3);
-            light_shift[idx::ELEVATION] = s;
-        }
-    }
-    Held {
-        fit: jf,
-        settings: fit_settings,
-        light_shift,
-        pulled: pulled.is_some(),
-    }
+) -> JointFit {
+    debug_assert!(settings.light_fit == LightFit::Hold && settings.start_light == Some(light));
+    held_from_the_fit(jf, light, fitted, measured, settings.eta_prior).unwrap_or_else(|| {
+        fit_joint(
+            &Setup::new(settings, measured, ext, settings.reduction),
+            fitted,
+        )
+    })
 }
 
 /// The most Newton steps of the held fit before the whole fit is repeated instead (the

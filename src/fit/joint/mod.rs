@@ -24,7 +24,9 @@
 //!   spread; [`baseline`]: the paper's procedure beside the fit;
 //! - [`intensity`]: one lamp intensity per photo and channel, fitted where a session with one
 //!   light per photo gives none;
-//! - [`hold`]: the light held at the detector's where the shading pulls it too far;
+//! - [`shading_light`]: the light the shading alone fits, and its spread over the spheres'
+//!   regions; [`combine`]: that light and the detector's combined by their covariances;
+//!   [`hold`]: the fit with the light held at the combination;
 //! - [`newton`]: Newton steps from a fit to the fit of a changed problem (a radius left out, the
 //!   light held), for the jackknife and the light's hold;
 //! - [`session`]: the fit with all of that around it, as `solve` runs it.
@@ -32,6 +34,7 @@
 pub mod baseline;
 pub mod checks;
 pub mod choice;
+pub mod combine;
 pub mod hold;
 pub mod identify;
 pub mod intensity;
@@ -42,6 +45,7 @@ pub mod reduction;
 pub mod regions;
 pub mod session;
 pub mod settings;
+pub mod shading_light;
 pub mod stages;
 pub mod start;
 

@@ -26,7 +26,7 @@ const TERMINATOR_COS: f64 = 0.2;
 
 /// The region of a pixel with normal n, view v and light l, for a lobe of roughness α: the
 /// highlight within 2.5 α of the half vector (at least 3°), then the rim, then the terminator.
-fn region(g: &crate::model::Geometry, l: &nalgebra::Vector3<f64>, alpha: f64) -> usize {
+pub(crate) fn region(g: &crate::model::Geometry, l: &nalgebra::Vector3<f64>, alpha: f64) -> usize {
     let h = (l + g.view).normalize();
     let off = g.normal.dot(&h).clamp(-1.0, 1.0).acos();
     if off < (2.5 * alpha).max(3f64.to_radians()) {

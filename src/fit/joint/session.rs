@@ -5,10 +5,10 @@
 
 use super::baseline::baseline;
 use super::choice::choose_extensions;
-use super::hold::hold_pulled_light;
+use super::combine::combine_lights;
 use super::jackknife::{jackknife_linear, jackknife_refit, Jackknife};
 use super::settings::{
-    ExtensionChoice, Extensions, JackknifeMethod, LightFit, Measured, Settings, Setup,
+    ExtensionChoice, Extensions, JackknifeMethod, Measured, Settings, Setup,
     DEFAULT_EXTENSION_RADII,
 };
 use super::stages::{fit_joint, JointFit};
@@ -55,7 +55,7 @@ pub fn fit_session(
         },
         fitted,
     );
-    let held = hold_pulled_light(settings, measured, fitted, ext, first, notes);
+    let held = combine_lights(settings, measured, fitted, ext, first, notes);
     let (mut jf, settings) = (held.fit, held.settings);
     jf.check_resolution(&setup, fitted);
     let jack = if settings.jackknife != JackknifeMethod::Off {
@@ -89,8 +89,8 @@ pub fn fit_session(
     notes.extend(jf.notes.iter().cloned());
     skipped.extend(reduction_skips(&jf));
     let std = stated_std(&jf, jack.as_ref(), &held.light_shift);
-    let light_fit = if held.pulled && settings.light_fit == LightFit::Hold {
-        "prior, then hold".into()
+    let light_fit = if held.combined {
+        "prior, then combined".into()
     } else {
         settings.light_fit.name().into()
     };

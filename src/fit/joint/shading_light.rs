@@ -1,0 +1,99 @@
+//! The shading's own light ([`shading_light`]): the light the pixels alone fit, the detector's
+//! prior taken out, with its formal covariance and the spread when each region of the spheres
+//! (lit side, terminator, rim, highlight: [`super::regions`]) is left out in turn. A model that
+//! describes the photos fits the same light from every region; one that does not (the kernel's
+//! shape across the terminator, a lobe that is not GGX) fits each region's light a little
+//! differently, and so does a shading computed on a misplaced outline. Everything is a Newton
+//! step from the joint fit on its final stage's normal equations, one pass over the
+//! observations (docs/uncertainty.md, "The detector's light and the shading's").
+
+use super::regions::{region, REGIONS};
+use super::stages::JointFit;
+use crate::fit::solver::{to_unbounded, RawNormal};
+use crate::model::{idx, LightAngles, N_PARAMS};
+use nalgebra::{Matrix2, Vector2};
+
+/// The shading's light and its errors; angles and covariances in radians, in (azimuth,
+/// elevation).
+pub(crate) struct ShadingLight {
+    pub light: LightAngles,
+    /// σ²(JᵀJ)⁻¹'s light block, with σ² the observations' χ² per degree of freedom.
+    pub formal: Matrix2<f64>,
+    /// The leave-one-region-out jackknife's covariance, (n − 1)/n Σ (θᵢ − θ̄)(θᵢ − θ̄)ᵀ.
+    pub regions: Matrix2<f64>,
+    /// χ² per degree of freedom of the observations (the noise's units, Huber weights).
+    pub chi2_dof: f64,
+    /// Per free parameter other than the light, how its unbounded value follows the light held
+    /// elsewhere: d u_k / d(azimuth, elevation) ([`crate::fit::solver::Problem::follows`]).
+    pub follows: Vec<(usize, [f64; 2])>,
+}
+
+/// Regions with fewer than this fraction of the observations are not left out on their own.
+const MIN_REGION: f64 = 0.01;
+
+/// The shading's light of the joint fit `jf` (module doc). `None` when its light is not free,
+/// fewer than two regions are large enough, or the normal equations are singular.
+pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
+    let p = &jf.fit.params;
+    if !jf.fit.free[idx::AZIMUTH] || !jf.fit.free[idx::ELEVATION] {
+        return None;
+    }
+    let l = p.light.direction();
+    let alpha = p.material.specular.alpha;
+    let obs = &jf.problem.weighted;
+    let groups: Vec<usize> = obs.iter().map(|o| region(&o.geometry, &l, alpha)).collect();
+    // The pixels alone: the problem without the light's prior.
+    let mut problem =
+        super::newton::problem(jf, obs, jf.fit.free, to_unbounded(&p.to_vec()));
+    problem
+        .priors
+        .retain(|q| q.index != idx::AZIMUTH && q.index != idx::ELEVATION);
+    let parts = problem.grouped_sums(Some((&groups, REGIONS.len())));
+    let total = RawNormal::sum(&parts)?;
+    let (alone, _) = problem.newton_step(&total)?;
+    let free: Vec<usize> = (0..N_PARAMS).filter(|&k| jf.fit.free[k]).collect();
+    let at = |k: usize| free.iter().position(|&f| f == k);
+    let (a, e) = (at(idx::AZIMUTH)?, at(idx::ELEVATION)?);
+    let ne = problem.profiled(&total);
+    let floor = if jf.fit.floor.is_some() { 3 } else { 0 };
+    let dof = (3 * obs.len()).saturating_sub(free.len() + floor).max(1);
+    let chi2_dof = ne.rtr_obs / dof as f64;
+    let inv = ne.jtj.clone().try_inverse()?;
+    let formal = Matrix2::new(inv[(a, a)], inv[(a, e)], inv[(e, a)], inv[(e, e)]) * chi2_dof;
+    let lefts: Vec<Vector2<f64>> = parts
+        .iter()
+        .enumerate()
+        .filter(|&(g, _)| {
+            let n = groups.iter().filter(|&&k| k == g).count();
+            n as f64 >= MIN_REGION * groups.len() as f64
+        })
+        .filter_map(|(_, part)| problem.newton_step(&total.less(part)))
+        .map(|(u, _)| Vector2::new(u[idx::AZIMUTH], u[idx::ELEVATION]))
+        .collect();
+    if lefts.len() < 2 {
+        return None;
+    }
+    let n = lefts.len() as f64;
+    let mean = lefts.iter().sum::<Vector2<f64>>() / n;
+    let regions = lefts
+        .iter()
+        .map(|v| (v - mean) * (v - mean).transpose())
+        .sum::<Matrix2<f64>>()
+        * ((n - 1.0) / n);
+    let follows = problem
+        .follows(&total, &[idx::AZIMUTH, idx::ELEVATION])
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(k, g)| (k, [g[0], g[1]]))
+        .collect();
+    Some(ShadingLight {
+        light: LightAngles {
+            azimuth: alone[idx::AZIMUTH],
+            elevation: alone[idx::ELEVATION],
+        },
+        formal,
+        regions,
+        chi2_dof,
+        follows,
+    })
+}
