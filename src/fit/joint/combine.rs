@@ -190,3 +190,58 @@ fn carried(cov: &Matrix2<f64>, shading: &ShadingLight, jf: &JointFit) -> [f64; N
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shading's light, isotropic in the tangent plane at elevation 0.2 (the detector's).
+    fn shading(light: LightAngles, std: f64) -> ShadingLight {
+        let c = 0.2f64.cos();
+        ShadingLight {
+            light,
+            // Isotropic on the sphere of directions: the azimuth's std is std / cos(elevation).
+            formal: Matrix2::new((std / c).powi(2), 0.0, 0.0, std.powi(2)),
+            regions: Matrix2::zeros(),
+            chi2_dof: 1.0,
+            follows: vec![],
+        }
+    }
+
+    /// Two isotropic measurements combine as inverse-variance weights say, per axis: the mean
+    /// w·μ_s + (1 − w)·μ_d with w = s_s⁻² / (s_d⁻² + s_s⁻²), and the variance
+    /// 1 / (s_d⁻² + s_s⁻²); where they disagree by more than √2 of their joint errors per degree
+    /// of freedom, the variance is widened by χ²/2.
+    #[test]
+    fn two_lights_combine_as_inverse_variance_weights() {
+        let det = LightAngles {
+            azimuth: 0.3,
+            elevation: 0.2,
+        };
+        let (sd, ss): (f64, f64) = (0.002, 0.001);
+        let w_s = ss.powi(-2) / (sd.powi(-2) + ss.powi(-2));
+        let var = 1.0 / (sd.powi(-2) + ss.powi(-2));
+        // Close (χ² < 2): no widening.
+        let near = LightAngles {
+            azimuth: 0.3 + 0.001,
+            elevation: 0.2 - 0.001,
+        };
+        let c = combine(det, sd, &shading(near, ss)).unwrap();
+        assert!((c.light.azimuth - (0.3 + w_s * 0.001)).abs() < 1e-12);
+        assert!((c.light.elevation - (0.2 - w_s * 0.001)).abs() < 1e-12);
+        assert!((c.cov[(1, 1)] - var).abs() < 1e-18);
+        assert!((c.cov[(0, 0)] - var / 0.2f64.cos().powi(2)).abs() < 1e-16);
+        assert_eq!(c.widened, 1.0);
+        // Far apart in elevation (5 joint errors): widened by χ²/2 = 12.5.
+        let joint = (sd * sd + ss * ss).sqrt();
+        let far = LightAngles {
+            azimuth: 0.3,
+            elevation: 0.2 + 5.0 * joint,
+        };
+        let c = combine(det, sd, &shading(far, ss)).unwrap();
+        assert!((c.chi2 - 25.0).abs() < 1e-9, "{}", c.chi2);
+        assert!((c.widened - 12.5).abs() < 1e-9);
+        assert!((c.light.elevation - (0.2 + w_s * 5.0 * joint)).abs() < 1e-12);
+        assert!((c.cov[(1, 1)] - 12.5 * var).abs() < 1e-16);
+    }
+}
