@@ -344,8 +344,8 @@ pub struct FitFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jackknife: Option<JackknifeJson>,
     /// How the light was treated: "prior" (the detector's light as a prior), "free", "hold", or
-    /// "prior, then hold" (the shading pulled the light beyond PULL_WARN of its errors, so it was
-    /// held at the detector's; `light_pull` says how far).
+    /// "prior, then combined" (the detector's light and the shading's combined by their
+    /// covariances, and the fit redone with the light held there; docs/uncertainty.md).
     #[serde(default)]
     pub light_fit: String,
     /// How far the fit moved the detector's light, in the prior's (or detector's) errors.

@@ -522,10 +522,15 @@ fn figures_are_written_and_redrawn_from_fit_json() {
         );
     }
     png_check(&plots.join("correlation.png"), None);
-    svg_has(
-        &plots,
-        "correlation",
-        &["σ0 r", "light az", "1.00", "correlation"],
+    svg_has(&plots, "correlation", &["σ0 r", "1.00", "correlation"]);
+    // The light's angles are in the matrix where the fit refined them, not where they were held
+    // at the combination with the detector's.
+    let svg = std::fs::read_to_string(plots.join("correlation.svg")).unwrap();
+    assert_eq!(
+        svg.contains("light az"),
+        f.light_fit != "prior, then combined",
+        "{}",
+        f.light_fit
     );
     png_check(&plots.join("holdout.png"), Some((1000, 760)));
     svg_has(
@@ -941,9 +946,10 @@ fn lamp_intensities_not_given_are_fitted() {
     );
     assert!(f.convergence.converged);
     // Measured: the lamps within 0.47%, σ0 within 0.088% (the lamps alike, one_light_per_photo:
-    // 0.40%).
+    // 0.40%); since the lights are combined (2026-12-04), σ0 within 0.37%: the light held at the
+    // combination with the photos' detector lights.
     assert!(off < 0.015, "{off}");
-    assert!(e < 0.003, "{e}");
+    assert!(e < 0.011, "{e}");
 }
 
 /// Issue 34's scene, as a user made it: the default session (1280×960, seed 1) composited onto a
@@ -1008,10 +1014,9 @@ fn a_disturbed_outline_is_covered_by_the_combined_light() {
     composite_with_stand(dir.path(), 8.0, 0.3);
     let t = truth(dir.path());
     let f = solve_with(dir.path(), "fit.json", |_| {});
-    let d: workbench::formats::detections::Detections = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("detections.json")).unwrap(),
-    )
-    .unwrap();
+    let d: workbench::formats::detections::Detections =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detections.json")).unwrap())
+            .unwrap();
     let truth_l = Vector3::from(t.light_direction);
     let det_err = Vector3::from(d.light_direction.unwrap())
         .angle(&truth_l)
@@ -1025,14 +1030,26 @@ fn a_disturbed_outline_is_covered_by_the_combined_light() {
     // The scene does disturb the detector beyond its stated error (else this tests nothing).
     assert!(det_err > 5.0 * det_std, "detector {det_err}° ± {det_std}°");
     assert_eq!(f.light_fit, "prior, then combined");
-    assert!(f.notes.iter().any(|n| n.starts_with("the light combines")
-        && n.contains("widened")));
+    assert!(f
+        .notes
+        .iter()
+        .any(|n| n.starts_with("the light combines") && n.contains("widened")));
     // Closer than the detector's, and covered (measured 0.241° ± 0.105°).
     assert!(err < 0.8 * det_err, "light {err}°");
-    assert!(err <= 3.0 * f.std.light_deg, "light {err}° ± {}°", f.std.light_deg);
+    assert!(
+        err <= 3.0 * f.std.light_deg,
+        "light {err}° ± {}°",
+        f.std.light_deg
+    );
     for c in 0..3 {
         let z = (f.sigma0_mm[c] - t.sigma0_mm[c]) / f.std.sigma0_mm[c];
-        assert!(z.abs() < 3.0, "σ0[{c}] {} ± {} against {}", f.sigma0_mm[c], f.std.sigma0_mm[c], t.sigma0_mm[c]);
+        assert!(
+            z.abs() < 3.0,
+            "σ0[{c}] {} ± {} against {}",
+            f.sigma0_mm[c],
+            f.std.sigma0_mm[c],
+            t.sigma0_mm[c]
+        );
         assert!(rel(f.sigma0_mm[c], t.sigma0_mm[c]) < 0.06, "σ0[{c}]");
     }
 }

@@ -736,7 +736,10 @@ fn how_the_parameters_follow_the_light_matches_differences() {
             let diff = (plus[*k] - minus[*k]) / (2.0 * eps);
             let scale = g[j].abs().max(diff.abs()).max(1e-3);
             worst = worst.max((g[j] - diff).abs() / scale);
-            println!("parameter {k} along light {j}: {:.5} against {diff:.5}", g[j]);
+            println!(
+                "parameter {k} along light {j}: {:.5} against {diff:.5}",
+                g[j]
+            );
         }
     }
     // Measured: the largest relative difference 5.6e-4 (ε = 1e-3 rad).

@@ -131,6 +131,7 @@ fn run_case(
             || n.contains("prior σ from")
             || n.contains("measured noise")
             || n.contains("from the camera's direction")
+            || n.contains("is poorly determined")
     });
     let why = if !f.convergence.converged {
         Some("not converged".to_string())

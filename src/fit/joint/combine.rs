@@ -81,7 +81,8 @@ pub(crate) fn combine(
 /// ([`shading_light`]) and combined with the detector's ([`combine`]); where the combination lies
 /// more than half its error from the fitted light, the light is held there and the fit repeated
 /// ([`hold_at`]), the combined covariance is the light's error, and it is carried into every
-/// other parameter through how each follows the light ([`ShadingLight::follows`]). A light held
+/// other parameter through how each follows the light ([`ShadingLight::follows`]), or, where
+/// larger, the parameter's shift from the fit at the shading's light joins its std. A light held
 /// from the start (`--hold-light`) keeps the detector's error, carried the same way.
 pub(crate) fn combine_lights(
     settings: &Settings,
@@ -136,7 +137,16 @@ pub(crate) fn combine_lights(
         fitted,
     );
     held.combined = true;
+    // The light's systematic on each other parameter: the combined error carried through, or
+    // the parameter's shift between the fit at the shading's light and the fit at the
+    // combination, whichever is larger (either light may be the right one).
     held.light_shift = carried(&comb.cov, &shading, &held.fit);
+    let (a, b) = (before.to_vec(), held.fit.fit.params.to_vec());
+    for k in 0..N_PARAMS {
+        if held.fit.fit.free[k] && k != idx::AZIMUTH && k != idx::ELEVATION {
+            held.light_shift[k] = held.light_shift[k].max((a[k] - b[k]).abs());
+        }
+    }
     let ce = comb.light.elevation.cos().abs();
     let light_std = (comb.cov[(0, 0)] * ce * ce + comb.cov[(1, 1)]).sqrt() / 2f64.sqrt();
     let s0 = |p: &crate::model::Params| {

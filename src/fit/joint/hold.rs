@@ -76,6 +76,10 @@ fn held_from_the_fit(
     let it = newton?;
     let problem = newton::problem(jf, &it.weighted, free, it.estimate.0);
     let (std, correlation, cost, floor) = problem.covariance_and_floor();
+    // The cost where the steps started (the light moved, the rest at the fit), with the last
+    // step's weights as the end's: the stage's history is its start and its end.
+    let at_start = newton::problem(jf, &it.weighted, free, u0);
+    let cost_start = 0.5 * at_start.profiled(&at_start.grouped_sums(None)[0]).rtr_obs;
     let fit = Fit {
         params: Params::from_vec(&from_unbounded(&it.estimate.0).0),
         free,
@@ -86,7 +90,7 @@ fn held_from_the_fit(
         evaluations: it.steps as usize,
         termination: format!("{} Newton steps from the fit with the light free", it.steps),
         converged: true,
-        history: vec![],
+        history: vec![cost_start, cost],
         floor,
     };
     let weighted = it.weighted;

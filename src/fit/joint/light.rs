@@ -1,8 +1,8 @@
 //! The light's prior: the detector's light (from the highlights) is a measurement with its own
 //! standard error, so the joint fit sees it as a Gaussian prior on the light's two angles
 //! ([`LightFit::Prior`]), or holds it, or leaves it free; after the fit, how far the shading
-//! pulled it from the detector's ([`LightPrior::pull`]). Holding a pulled light and refitting is
-//! a phase of the session ([`crate::fit::joint::session`]).
+//! pulled it from the detector's ([`LightPrior::pull`]). Combining the shading's light with the
+//! detector's and refitting there is a phase of the session ([`crate::fit::joint::combine`]).
 
 use super::settings::{LightFit, Setup};
 use crate::fit::solver::{Fit, Prior};

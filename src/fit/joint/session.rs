@@ -1,6 +1,6 @@
 //! A joint fit with what the settings ask around it ([`fit_session`]): the extensions (the
-//! default, named, or chosen by held-out error), the light held at the detector's when the shading
-//! pulls it too far, the jackknife, the paper's baseline beside it, and each parameter's stated
+//! default, named, or chosen by held-out error), the detector's light and the shading's combined
+//! by their covariances, the jackknife, the paper's baseline beside it, and each parameter's stated
 //! standard error from all of them.
 
 use super::baseline::baseline;
@@ -20,7 +20,8 @@ use std::time::Instant;
 /// What [`fit_session`] returns.
 pub struct Session {
     pub fit: JointFit,
-    /// The settings the fit ran with: the light's treatment is `Hold` where a pulled light was held.
+    /// The settings the fit ran with: the light's treatment is `Hold` (at `start_light`) where the
+    /// light was held at the combination.
     pub settings: Settings,
     /// What was skipped, and why.
     pub skipped: Vec<String>,
@@ -31,7 +32,7 @@ pub struct Session {
     /// Each parameter's stated standard error: the formal one or the jackknife's spread, scaled
     /// for a prior's tension, with the light's systematic (and η's) added in quadrature.
     pub std: [f64; N_PARAMS],
-    /// How the light was treated ("prior", "free", "hold", "prior, then hold").
+    /// How the light was treated ("prior", "free", "hold", "prior, then combined").
     pub light_fit: String,
 }
 
@@ -45,8 +46,8 @@ pub fn fit_session(
     let mut skipped = vec![];
     let (ext, model_choice, model_choice_s) =
         extensions(settings, measured, fitted, &mut skipped, notes);
-    // The resolution check waits for the fit that stands: a light held after a pull replaces
-    // this fit with one that runs its own.
+    // The resolution check waits for the fit that stands: a light held at the combination
+    // replaces this fit with one that runs its own.
     let setup = Setup::new(settings, measured, ext, settings.reduction);
     let first = fit_joint(
         &Setup {

@@ -9,7 +9,7 @@
 
 use super::regions::{region, REGIONS};
 use super::stages::JointFit;
-use crate::fit::solver::{to_unbounded, RawNormal};
+use crate::fit::solver::{to_unbounded, Normal, RawNormal};
 use crate::model::{idx, LightAngles, N_PARAMS};
 use nalgebra::{Matrix2, Vector2};
 
@@ -43,14 +43,14 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
     let obs = &jf.problem.weighted;
     let groups: Vec<usize> = obs.iter().map(|o| region(&o.geometry, &l, alpha)).collect();
     // The pixels alone: the problem without the light's prior.
-    let mut problem =
-        super::newton::problem(jf, obs, jf.fit.free, to_unbounded(&p.to_vec()));
+    let mut problem = super::newton::problem(jf, obs, jf.fit.free, to_unbounded(&p.to_vec()));
     problem
         .priors
         .retain(|q| q.index != idx::AZIMUTH && q.index != idx::ELEVATION);
     let parts = problem.grouped_sums(Some((&groups, REGIONS.len())));
     let total = RawNormal::sum(&parts)?;
     let (alone, _) = problem.newton_step(&total)?;
+    let at_fit = Vector2::new(p.light.azimuth, p.light.elevation);
     let free: Vec<usize> = (0..N_PARAMS).filter(|&k| jf.fit.free[k]).collect();
     let at = |k: usize| free.iter().position(|&f| f == k);
     let (a, e) = (at(idx::AZIMUTH)?, at(idx::ELEVATION)?);
@@ -67,8 +67,10 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
             let n = groups.iter().filter(|&&k| k == g).count();
             n as f64 >= MIN_REGION * groups.len() as f64
         })
-        .filter_map(|(_, part)| problem.newton_step(&total.less(part)))
-        .map(|(u, _)| Vector2::new(u[idx::AZIMUTH], u[idx::ELEVATION]))
+        .filter_map(|(_, part)| {
+            let step = step_without(&problem.profiled(&total.less(part)), &ne, (a, e))?;
+            Some(at_fit + step)
+        })
         .collect();
     if lefts.len() < 2 {
         return None;
@@ -97,3 +99,25 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
         follows,
     })
 }
+
+/// The light's Newton step (azimuth, elevation) on the normal equations `less` of the
+/// observations without one region, from the fit: the parameters that region alone determined
+/// (JᵀJ's diagonal below [`KEPT_INFORMATION`] of its value over all regions, e.g. the lobe's
+/// without the highlight) held at the fit, so that the step measures the light the other
+/// regions fit rather than a lobe left free without data. `None` where the kept block is
+/// singular. `(a, e)`: the light's positions among the free parameters.
+fn step_without(less: &Normal, all: &Normal, (a, e): (usize, usize)) -> Option<Vector2<f64>> {
+    let n = all.jtj.nrows();
+    let kept: Vec<usize> = (0..n)
+        .filter(|&i| i == a || i == e || less.jtj[(i, i)] >= KEPT_INFORMATION * all.jtj[(i, i)])
+        .collect();
+    let h = less.jtj.select_rows(&kept).select_columns(&kept);
+    let g = less.jtr.select_rows(&kept);
+    let delta = h.cholesky()?.solve(&(-g));
+    let at = |i: usize| kept.iter().position(|&k| k == i);
+    Some(Vector2::new(delta[at(a)?], delta[at(e)?]))
+}
+
+/// A parameter keeps at least this fraction of its information (JᵀJ's diagonal) without a
+/// region, or is held at the fit in that region's leave-out step.
+const KEPT_INFORMATION: f64 = 0.1;

@@ -87,8 +87,8 @@ pub struct JointFit {
 impl JointFit {
     /// σ0 against the limits of what the data resolve ([`resolution_notes`]: refits with σ0 → 0
     /// or → ∞), once: the statuses and notes of the channels that are bounds, not measurements,
-    /// and its seconds as the phase "resolution check". A fit that another replaces (the pulled
-    /// light's, before the hold) skips it.
+    /// and its seconds as the phase "resolution check". A fit that another replaces (the light's
+    /// before it is held at the combination with the detector's) skips it.
     pub(crate) fn check_resolution(&mut self, setup: &Setup, spheres: &[&SphereData]) {
         if self.resolution_checked {
             return;
