@@ -42,7 +42,8 @@ pub(crate) struct Combined {
 /// The inverse-covariance mean of the detector's light (isotropic, `detector_std` radians) and
 /// the shading's ([`ShadingLight`]: its formal covariance plus its regions' jackknife, the latter
 /// widened by the residuals' χ² per degree of freedom where that is above 1: a model that does
-/// not describe the photos misplaces each region's light by more than the regions' spread shows).
+/// not describe the photos misplaces each region's light by more than the regions' spread shows;
+/// plus its radii's jackknife).
 /// In the tangent plane at the detector's light (azimuth × cos elevation, elevation): μ = μ_d +
 /// D (D + S)⁻¹ (μ_s − μ_d), C = D − D (D + S)⁻¹ D, widened by χ²/2 where the difference's χ² (2
 /// degrees of freedom) exceeds 2.
@@ -54,7 +55,7 @@ pub(crate) fn combine(
     let c = detector.elevation.cos().abs().max(1e-3);
     let t = Matrix2::new(c, 0.0, 0.0, 1.0);
     let d = Matrix2::identity() * detector_std.powi(2);
-    let s = t * (shading.formal + shading.regions * shading.chi2_dof.max(1.0)) * t;
+    let s = t * (shading.formal + shading.regions * shading.chi2_dof.max(1.0) + shading.radii) * t;
     let mut daz = shading.light.azimuth - detector.azimuth;
     daz -= (daz / std::f64::consts::TAU).round() * std::f64::consts::TAU;
     let diff = Vector2::new(daz * c, shading.light.elevation - detector.elevation);
@@ -114,7 +115,7 @@ pub(crate) fn combine_lights(
         return held;
     }
     let d_std = d_std.max(LIGHT_PRIOR_FLOOR);
-    let Some(shading) = shading_light(&held.fit) else {
+    let Some(shading) = shading_light(&held.fit, fitted) else {
         return held;
     };
     let Some(comb) = combine(detector, d_std, &shading) else {
@@ -213,6 +214,7 @@ mod tests {
             // Isotropic on the sphere of directions: the azimuth's std is std / cos(elevation).
             formal: Matrix2::new((std / c).powi(2), 0.0, 0.0, std.powi(2)),
             regions: Matrix2::zeros(),
+            radii: Matrix2::zeros(),
             chi2_dof: 1.0,
             follows: vec![],
         }

@@ -1,6 +1,7 @@
 //! The shading's own light ([`shading_light`]): the light the pixels alone fit, the detector's
 //! prior taken out, with its formal covariance and the spread when each region of the spheres
-//! (lit side, terminator, rim, highlight: [`super::regions`]) is left out in turn. A model that
+//! (lit side, terminator, rim, highlight: [`super::regions`]) is left out in turn, and when each
+//! radius is (as the fit's own jackknife does). A model that
 //! describes the photos fits the same light from every region; one that does not (the kernel's
 //! shape across the terminator, a lobe that is not GGX) fits each region's light a little
 //! differently, and so does a shading computed on a misplaced outline. Everything is a Newton
@@ -9,6 +10,7 @@
 
 use super::regions::{region, REGIONS};
 use super::stages::JointFit;
+use crate::fit::observe::{self, SphereData};
 use crate::fit::solver::{to_unbounded, Normal, RawNormal};
 use crate::model::{idx, LightAngles, N_PARAMS};
 use nalgebra::{Matrix2, Vector2};
@@ -21,6 +23,9 @@ pub(crate) struct ShadingLight {
     pub formal: Matrix2<f64>,
     /// The leave-one-region-out jackknife's covariance, (n − 1)/n Σ (θᵢ − θ̄)(θᵢ − θ̄)ᵀ.
     pub regions: Matrix2<f64>,
+    /// The leave-one-radius-out jackknife's, widened as the fit's own (zero with fewer than 3
+    /// radii): what the radii's jackknife of the fit would add to the light's error.
+    pub radii: Matrix2<f64>,
     /// χ² per degree of freedom of the observations (the noise's units, Huber weights).
     pub chi2_dof: f64,
     /// Per free parameter other than the light, how its unbounded value follows the light held
@@ -33,7 +38,7 @@ const MIN_REGION: f64 = 0.01;
 
 /// The shading's light of the joint fit `jf` (module doc). `None` when its light is not free,
 /// fewer than two regions are large enough, or the normal equations are singular.
-pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
+pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<ShadingLight> {
     let p = &jf.fit.params;
     if !jf.fit.free[idx::AZIMUTH] || !jf.fit.free[idx::ELEVATION] {
         return None;
@@ -41,13 +46,30 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
     let l = p.light.direction();
     let alpha = p.material.specular.alpha;
     let obs = &jf.problem.weighted;
-    let groups: Vec<usize> = obs.iter().map(|o| region(&o.geometry, &l, alpha)).collect();
+    // Each observation's group: its region and its sphere's radius (the parts of a region, or
+    // of a radius, summed are that region's, or that radius's, normal equations).
+    let radii = observe::distinct_radii(fitted);
+    let radius_of: Vec<usize> = fitted
+        .iter()
+        .map(|s| {
+            radii
+                .iter()
+                .position(|&r| (s.radius_mm - r).abs() < 1e-9)
+                .expect("a fitted radius")
+        })
+        .collect();
+    let nr = radii.len();
+    let groups: Vec<usize> = obs
+        .iter()
+        .zip(&jf.problem.sphere)
+        .map(|(o, &s)| region(&o.geometry, &l, alpha) * nr + radius_of[s])
+        .collect();
     // The pixels alone: the problem without the light's prior.
     let mut problem = super::newton::problem(jf, obs, jf.fit.free, to_unbounded(&p.to_vec()));
     problem
         .priors
         .retain(|q| q.index != idx::AZIMUTH && q.index != idx::ELEVATION);
-    let parts = problem.grouped_sums(Some((&groups, REGIONS.len())));
+    let parts = problem.grouped_sums(Some((&groups, REGIONS.len() * nr)));
     let total = RawNormal::sum(&parts)?;
     let (alone, _) = problem.newton_step(&total)?;
     let at_fit = Vector2::new(p.light.azimuth, p.light.elevation);
@@ -60,28 +82,37 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
     let chi2_dof = ne.rtr_obs / dof as f64;
     let inv = ne.jtj.clone().try_inverse()?;
     let formal = Matrix2::new(inv[(a, a)], inv[(a, e)], inv[(e, a)], inv[(e, e)]) * chi2_dof;
-    let lefts: Vec<Vector2<f64>> = parts
-        .iter()
-        .enumerate()
-        .filter(|&(g, _)| {
-            let n = groups.iter().filter(|&&k| k == g).count();
-            n as f64 >= MIN_REGION * groups.len() as f64
-        })
-        .filter_map(|(_, part)| {
-            let step = step_without(&problem.profiled(&total.less(part)), &ne, (a, e))?;
-            Some(at_fit + step)
-        })
+    // The light without each region, then without each radius.
+    let region_part = |g: usize| RawNormal::sum(&parts[g * nr..(g + 1) * nr]);
+    let radius_part = |r: usize| {
+        let of: Vec<RawNormal> = (0..REGIONS.len()).map(|g| parts[g * nr + r].clone()).collect();
+        RawNormal::sum(&of)
+    };
+    let without = |part: Option<RawNormal>| {
+        let step = step_without(&problem.profiled(&total.less(&part?)), &ne, (a, e))?;
+        Some(at_fit + step)
+    };
+    let large = |n: usize| n as f64 >= MIN_REGION * groups.len() as f64;
+    let count = |f: &dyn Fn(usize) -> bool| groups.iter().filter(|&&k| f(k)).count();
+    let lefts: Vec<Vector2<f64>> = (0..REGIONS.len())
+        .filter(|&g| large(count(&|k| k / nr == g)))
+        .filter_map(|g| without(region_part(g)))
         .collect();
+    let by_radius: Vec<Vector2<f64>> = (0..nr).filter_map(|r| without(radius_part(r))).collect();
     if lefts.len() < 2 {
         return None;
     }
-    let n = lefts.len() as f64;
-    let mean = lefts.iter().sum::<Vector2<f64>>() / n;
-    let regions = lefts
-        .iter()
-        .map(|v| (v - mean) * (v - mean).transpose())
-        .sum::<Matrix2<f64>>()
-        * ((n - 1.0) / n);
+    let regions = jackknife(&lefts, 1.0);
+    // The radii's as the fit's own jackknife widens it (t(n − 1)/2: src/fit/joint/jackknife.rs).
+    let radii_cov = if by_radius.len() >= 3 {
+        let t = crate::stats::t_quantile_central(
+            crate::stats::TWO_SIGMA,
+            by_radius.len() as u32 - 1,
+        ) / 2.0;
+        jackknife(&by_radius, t * t)
+    } else {
+        Matrix2::zeros()
+    };
     let follows = problem
         .follows(&total, &[idx::AZIMUTH, idx::ELEVATION])
         .unwrap_or_default()
@@ -95,6 +126,7 @@ pub(crate) fn shading_light(jf: &JointFit) -> Option<ShadingLight> {
         },
         formal,
         regions,
+        radii: radii_cov,
         chi2_dof,
         follows,
     })
@@ -121,3 +153,15 @@ fn step_without(less: &Normal, all: &Normal, (a, e): (usize, usize)) -> Option<V
 /// A parameter keeps at least this fraction of its information (JᵀJ's diagonal) without a
 /// region, or is held at the fit in that region's leave-out step.
 const KEPT_INFORMATION: f64 = 0.1;
+
+/// The jackknife covariance of leave-one-out estimates, (n − 1)/n Σ (θᵢ − θ̄)(θᵢ − θ̄)ᵀ, times
+/// `widen`.
+fn jackknife(estimates: &[Vector2<f64>], widen: f64) -> Matrix2<f64> {
+    let n = estimates.len() as f64;
+    let mean = estimates.iter().sum::<Vector2<f64>>() / n;
+    estimates
+        .iter()
+        .map(|v| (v - mean) * (v - mean).transpose())
+        .sum::<Matrix2<f64>>()
+        * ((n - 1.0) / n * widen)
+}
