@@ -85,7 +85,9 @@ pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<Sha
     // The light without each region, then without each radius.
     let region_part = |g: usize| RawNormal::sum(&parts[g * nr..(g + 1) * nr]);
     let radius_part = |r: usize| {
-        let of: Vec<RawNormal> = (0..REGIONS.len()).map(|g| parts[g * nr + r].clone()).collect();
+        let of: Vec<RawNormal> = (0..REGIONS.len())
+            .map(|g| parts[g * nr + r].clone())
+            .collect();
         RawNormal::sum(&of)
     };
     let without = |part: Option<RawNormal>| {
@@ -105,10 +107,9 @@ pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<Sha
     let regions = jackknife(&lefts, 1.0);
     // The radii's as the fit's own jackknife widens it (t(n − 1)/2: src/fit/joint/jackknife.rs).
     let radii_cov = if by_radius.len() >= 3 {
-        let t = crate::stats::t_quantile_central(
-            crate::stats::TWO_SIGMA,
-            by_radius.len() as u32 - 1,
-        ) / 2.0;
+        let t =
+            crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, by_radius.len() as u32 - 1)
+                / 2.0;
         jackknife(&by_radius, t * t)
     } else {
         Matrix2::zeros()
