@@ -510,16 +510,21 @@ fn grey_backdrop_and_table() {
             f.notes
         );
         let fl = f.dark_floor.expect("the floor is fitted");
+        // σ0 against the truth, with black's beside it (the sessions share the material).
         let sigma0_off = |f: &workbench::formats::fit::FitFile| {
             (0..3)
-                .map(|c| (f.sigma0_mm[c] / f_black.sigma0_mm[c] - 1.0).abs())
+                .map(|c| (f.sigma0_mm[c] / t.sigma0_mm[c] - 1.0).abs())
                 .fold(0.0, f64::max)
         };
+        println!(
+            "black: σ0 {:.2}% from the truth",
+            100.0 * sigma0_off(&f_black)
+        );
         let dl = Vector3::from(f.light_direction)
             .angle(&Vector3::from(t.light_direction))
             .to_degrees();
         println!(
-            "{backdrop}, floor fitted: {:?} ± {:?} (truth {}), light {dl:.4}°, σ0 {:?}: {:.2}% from black",
+            "{backdrop}, floor fitted: {:?} ± {:?} (truth {}), light {dl:.4}°, σ0 {:?}: {:.2}% from the truth",
             fl.value,
             fl.std,
             t.render.ambient,
@@ -535,9 +540,12 @@ fn grey_backdrop_and_table() {
             );
             assert!(e.abs() < 2e-5, "{backdrop} channel {c}: floor off by {e}");
         }
-        // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.28% from black; the goal 0.5% for σ0,
-        // about 3× the measured light's error for the light.
-        assert!(dl < 0.02, "{backdrop}: {dl}°");
+        // Measured: light 0.003–0.006°, σ0 0.32/0.41/0.28% from black's; since the lights are
+        // combined (2026-12-04) light 0.006° (grey), 0.030° (table: its detector's is 0.054° off
+        // and the combination leans on it), σ0 0.10–0.29% from the truth (black's 0.52%). The
+        // goals: 0.5% for σ0, 0.05° for the light (its std here is the formal one alone: the
+        // jackknife is off).
+        assert!(dl < 0.05, "{backdrop}: {dl}°");
         assert!(sigma0_off(&f) < 0.005, "{backdrop}: {}", sigma0_off(&f));
         // With it given (truth's ambient), σ0 as on black.
         let p = dir.path().join("session.json");
@@ -549,17 +557,21 @@ fn grey_backdrop_and_table() {
         let dl = Vector3::from(f.light_direction)
             .angle(&Vector3::from(t.light_direction))
             .to_degrees();
-        println!("{backdrop}: solved light {dl:.4}°");
-        assert!(dl < 0.02, "{backdrop}: {dl}°");
+        println!(
+            "{backdrop}: solved light {dl:.4}° ± {:.4}°",
+            f.std.light_deg
+        );
+        assert!(dl < 0.05, "{backdrop}: {dl}°");
         assert!(f.dark_floor.is_none());
         let worst = sigma0_off(&f);
         println!(
-            "{backdrop}: σ0 {:?} vs black {:?}: {:.2}%",
+            "{backdrop}: σ0 {:?} (black {:?}): {:.2}% from the truth",
             f.sigma0_mm,
             f_black.sigma0_mm,
             100.0 * worst
         );
-        // Measured 0.21% (grey), 0.37% (table), 0.21% (pin); the goal 0.5%.
+        // Measured 0.21% (grey), 0.37% (table), 0.21% (pin) from black's; from the truth since the
+        // lights are combined (black's own is printed); the goal 0.5%.
         assert!(worst < 0.005, "{backdrop}: {worst}");
     }
 }

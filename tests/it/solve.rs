@@ -439,8 +439,11 @@ fn extensions_are_chosen_by_held_out_error() {
         mc.chosen, mc.reason, f.sigma_exponent, f.std.sigma_exponent
     );
     assert!(mc.chosen.contains("sigma-exponent"), "{}", mc.chosen);
-    // Measured 0.601 ± 0.0013.
-    assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 0.004);
+    // Measured 0.601 ± 0.0013 with the light refined; 0.595 ± 0.012 since the light is held at
+    // its combination with the detector's (2026-12-04), whose error q now carries.
+    let q_std = f.std.sigma_exponent.unwrap();
+    assert!(q_std < 0.04, "q ± {q_std}");
+    assert!((f.sigma_exponent.unwrap() - 0.6).abs() < 3.0 * q_std);
     // On plain data the plain model is kept.
     let guard = default_session();
     let plain = solve_with(guard.path(), "fit-ext.json", |o| {

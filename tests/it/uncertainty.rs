@@ -451,8 +451,9 @@ fn linear_jackknife_matches_the_refits() {
             lin.timings.jackknife_s,
             refit.timings.jackknife_s
         );
-        // Measured (2026-12-03): 1.5e-5 without the Huber loss, 1.0e-2 with it.
-        assert!(worst < if robust { 0.03 } else { 5e-5 }, "{worst}");
+        // Measured (2026-12-03): 1.5e-5 without the Huber loss, 1.0e-2 with it; with the light
+        // held at its combination with the detector's (2026-12-04), 3.0e-5 and 3.0e-2.
+        assert!(worst < if robust { 0.06 } else { 9e-5 }, "{worst}");
     }
 }
 
