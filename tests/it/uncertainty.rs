@@ -525,18 +525,18 @@ fn flagged(f: &FitFile, what: &str) -> bool {
 /// Coverage on physically based photos (docs/uncertainty.md, "Coverage on physically based
 /// sessions"): eight small `synth pbr` sessions (datasets/pbr-seeds, `scripts/pbr-seeds.sh`:
 /// wax-, soap- and jade-like, eight lights, 640×480, 1024 samples a pixel), solved with the
-/// defaults. Truth: the light, η and the boundary's GGX α (σ0 has none). Measured (2026-12-04),
-/// error / stated std:
-/// - light: 0.53, 0.72, 1.26, 4.04 (soap-5, flagged: the shading pulls the light), 0.21, 1.07,
-///   0.48, 0.77;
-/// - η: −0.58, −0.69, −0.05, −0.58, −1.45, −1.57, −2.96, −2.27 (low on every session);
-/// - α: +0.87, +11.1 (jade-6, flagged: residuals 9.7× the noise), −0.79, −0.66, −1.07, +0.20,
-///   −0.67, −0.48 (before the check against the detector's α, soap's were −3.0, −1.7, −24).
+/// defaults. Truth: the light, η and the boundary's GGX α (σ0 has none). Measured (2026-12-04,
+/// the lights combined), error / stated std:
+/// - light: 0.22, 0.86, 1.85, 4.81 (soap-5, flagged: the shading pulls the light), 0.57, 0.19,
+///   0.20, 0.93 (with the hold before: 0.53, 0.72, 1.26, 4.04, 0.21, 1.07, 0.48, 0.77);
+/// - η: +0.59, −0.69, −0.05, −0.57, −0.52, −1.49, −2.85, −2.24;
+/// - α: +0.36, +7.74 (jade-6, flagged: residuals 9.7× the noise), −0.80, −0.67, −1.04, +0.08,
+///   −0.93, −0.55 (before the check against the detector's α, soap's were −3.0, −1.7, −24).
 ///
 /// Asserted: every value within 3 of its stated std or flagged in the notes, at most two
 /// flagged; at least 17 of the 24 within ±2 (20 measured; 2.5 binomial std below); each
-/// parameter's z RMS, the flagged values beyond 3 left out, in 0.3–2.5 (measured 0.79, 1.57,
-/// 0.73), so a std ten times too large fails too.
+/// parameter's z RMS, the flagged values beyond 3 left out, in 0.3–2.5 (measured 0.88, 1.45,
+/// 0.70), so a std ten times too large fails too.
 #[test]
 fn physically_based_coverage_over_seeds() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds");

@@ -157,7 +157,7 @@ pub(crate) fn combine_lights(
             .join(", ")
     };
     notes.push(format!(
-        "the light combines the highlights' estimate (± {:.4}°) and the shading's ({:.3}° from it, ± {:.4}° with its regions' spread) by their errors: {:.3}° from the highlights' (± {:.4}°){}; with the shading's light σ0 was {} mm",
+        "the light combines the highlights' estimate (± {:.4}° per axis) and the shading's ({:.3}° from it, ± {:.4}° per axis with its regions' and radii's spread) by their errors: {:.3}° from the highlights' (± {:.4}° per axis){}; with the shading's light σ0 was {} mm",
         d_std.to_degrees(),
         dir.angle(&shading.light.direction()).to_degrees(),
         comb.shading_std.to_degrees(),

@@ -99,7 +99,7 @@ impl LightPrior {
         if let Some(lp) = &light_pull {
             if lp.pull > PULL_WARN {
                 notes.push(format!(
-                    "the shading pulls the light {:.3}° from the highlights' estimate ({:.1} times its ± {:.4}°): the model does not describe the shading fully{}",
+                    "the shading pulls the light {:.3}° from the highlights' estimate ({:.1} times its ± {:.4}°): the model does not describe the shading fully, or the outlines the highlights' light rests on are off{}",
                     lp.moved_deg,
                     lp.pull,
                     lp.prior_std_deg.unwrap_or(lp.detector_std_deg),
