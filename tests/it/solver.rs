@@ -394,6 +394,19 @@ fn normal_equations_equal_the_product_of_the_jacobian() {
 }
 
 /// The observations with a dark floor added to each channel.
+/// The problem on `obs` with a dark floor profiled out, no priors, `free` fitted, at `u`.
+fn floored(obs: &[Obs], free: [bool; N_PARAMS], u: [f64; N_PARAMS]) -> Problem<'_> {
+    Problem {
+        model: Model::default(),
+        obs,
+        free,
+        u,
+        priors: vec![],
+        history: None,
+        floor: true,
+    }
+}
+
 fn with_floor(obs: &[Obs], floor: [f64; 3]) -> Vec<Obs> {
     obs.iter()
         .map(|o| {
@@ -424,15 +437,7 @@ fn floor_profiled_out_jacobian_matches_differences_and_the_normal_equations() {
     let free = plain_free();
     let mut start = p;
     start.material.sigma0_mm = [5.0, 3.5, 2.0];
-    let problem = |u: [f64; N_PARAMS]| Problem {
-        model: Model::default(),
-        obs: &obs,
-        free,
-        u,
-        priors: vec![],
-        history: None,
-        floor: true,
-    };
+    let problem = |u: [f64; N_PARAMS]| floored(&obs, free, u);
     let base = problem(to_unbounded(&start.to_vec()));
     let (r, j) = base.evaluate(true);
     let j = j.unwrap();
@@ -618,15 +623,7 @@ fn newton_steps_from_the_full_fit_reach_the_fit_without_a_group() {
     };
     let full = fit(&obs, &t);
     fn at(obs: &[Obs], u: [f64; N_PARAMS]) -> Problem<'_> {
-        Problem {
-            model: Model::default(),
-            obs,
-            free: plain_free(),
-            u,
-            priors: vec![],
-            history: None,
-            floor: true,
-        }
+        floored(obs, plain_free(), u)
     }
     let u_full = to_unbounded(&full.params.to_vec());
     let whole = at(&obs, u_full);
@@ -693,15 +690,7 @@ fn how_the_parameters_follow_the_light_matches_differences() {
     let free = plain_free();
     let full = solver::fit_with_floor(Model::default(), &obs, &t, free, &[], true);
     let u = to_unbounded(&full.params.to_vec());
-    let problem = Problem {
-        model: Model::default(),
-        obs: &obs,
-        free,
-        u,
-        priors: vec![],
-        history: None,
-        floor: true,
-    };
+    let problem = floored(&obs, free, u);
     let raw = problem.grouped_sums(None).swap_remove(0);
     let follows = problem
         .follows(&raw, &[idx::AZIMUTH, idx::ELEVATION])
@@ -718,15 +707,7 @@ fn how_the_parameters_follow_the_light_matches_differences() {
             let mut v = u;
             v[k_light] += s * eps;
             for _ in 0..8 {
-                let q = Problem {
-                    model: Model::default(),
-                    obs: &obs,
-                    free: held,
-                    u: v,
-                    priors: vec![],
-                    history: None,
-                    floor: true,
-                };
+                let q = floored(&obs, held, v);
                 v = q.newton_step(&q.grouped_sums(None)[0]).unwrap().0;
             }
             v
