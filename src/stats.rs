@@ -99,6 +99,13 @@ pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }
 
+/// The factor a jackknife's standard error from `n` leave-one-out estimates is widened by,
+/// t_{n−1}/2 at [`TWO_SIGMA`]: its ±2 then covers 95.4% with n − 1 degrees of freedom, as ±2σ of a
+/// Gaussian does (1.42 for five estimates).
+pub fn jackknife_widening(n: usize) -> f64 {
+    t_quantile_central(TWO_SIGMA, n as u32 - 1) / 2.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

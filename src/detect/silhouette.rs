@@ -756,7 +756,7 @@ fn arc_jackknife(
         return None;
     }
     let mean = estimates.iter().sum::<Vector3<f64>>() / n as f64;
-    let widen = crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, n as u32 - 1) / 2.0;
+    let widen = crate::stats::jackknife_widening(n);
     let scatter: Matrix3<f64> = estimates
         .iter()
         .map(|e| (e - mean) * (e - mean).transpose())

@@ -80,6 +80,19 @@ pub fn distinct_radii(spheres: &[&SphereData]) -> Vec<f64> {
     radii
 }
 
+/// Each sphere's position in `radii` (from [`distinct_radii`], in any order).
+pub fn radius_index(spheres: &[&SphereData], radii: &[f64]) -> Vec<usize> {
+    spheres
+        .iter()
+        .map(|s| {
+            radii
+                .iter()
+                .position(|&r| (s.radius_mm - r).abs() < 1e-9)
+                .expect("a sphere's radius among the distinct radii")
+        })
+        .collect()
+}
+
 /// A display copy of the photo around a sphere: sRGB 8-bit means of `step` × `step` pixel blocks,
 /// the first block's corner at pixel (x0, y0). At most [`Crop::MAX_CELLS`] blocks across. A dark
 /// crop (99th percentile below 0.45 of full scale) is brightened by `gain` (at most 8) so that its

@@ -84,7 +84,7 @@ pub(crate) fn combine(
 /// ([`hold_at`]), the combined covariance is the light's error, and it is carried into every
 /// other parameter through how each follows the light ([`ShadingLight::follows`]), or, where
 /// larger, the parameter's shift from the fit at the shading's light joins its std. A light held
-/// from the start (`--hold-light`) keeps the detector's error, carried the same way.
+/// from the start (`--hold-light`) keeps the detector's error on its two angles only.
 pub(crate) fn combine_lights(
     settings: &Settings,
     measured: &Measured,

@@ -94,15 +94,7 @@ pub fn jackknife_linear(fitted: &[&SphereData], jf: &JointFit) -> Option<Jackkni
         return None;
     }
     let same = |s: &SphereData, r: f64| (s.radius_mm - r).abs() < 1e-9;
-    let group_of: Vec<usize> = fitted
-        .iter()
-        .map(|s| {
-            radii
-                .iter()
-                .position(|&r| same(s, r))
-                .expect("a fitted radius")
-        })
-        .collect();
+    let group_of = observe::radius_index(fitted, &radii);
     let groups: Vec<usize> = jf.problem.sphere.iter().map(|&s| group_of[s]).collect();
     let u_full = to_unbounded(&jf.fit.params.to_vec());
     let full = newton::problem(jf, &jf.problem.weighted, jf.fit.free, u_full);
@@ -180,8 +172,7 @@ fn iterate(
 /// of freedom, as ±2σ of a Gaussian does: 1.42 for five radii); 0 where not free.
 fn spread(values: &[[f64; N_PARAMS]], free: &[bool; N_PARAMS]) -> [f64; N_PARAMS] {
     let n = values.len() as f64;
-    let widen =
-        crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, values.len() as u32 - 1) / 2.0;
+    let widen = crate::stats::jackknife_widening(values.len());
     std::array::from_fn(|k| {
         if !free[k] {
             return 0.0;

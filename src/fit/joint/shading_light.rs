@@ -49,15 +49,7 @@ pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<Sha
     // Each observation's group: its region and its sphere's radius (the parts of a region, or
     // of a radius, summed are that region's, or that radius's, normal equations).
     let radii = observe::distinct_radii(fitted);
-    let radius_of: Vec<usize> = fitted
-        .iter()
-        .map(|s| {
-            radii
-                .iter()
-                .position(|&r| (s.radius_mm - r).abs() < 1e-9)
-                .expect("a fitted radius")
-        })
-        .collect();
+    let radius_of = observe::radius_index(fitted, &radii);
     let nr = radii.len();
     let groups: Vec<usize> = obs
         .iter()
@@ -107,9 +99,7 @@ pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<Sha
     let regions = jackknife(&lefts, 1.0);
     // The radii's as the fit's own jackknife widens it (t(n − 1)/2: src/fit/joint/jackknife.rs).
     let radii_cov = if by_radius.len() >= 3 {
-        let t =
-            crate::stats::t_quantile_central(crate::stats::TWO_SIGMA, by_radius.len() as u32 - 1)
-                / 2.0;
+        let t = crate::stats::jackknife_widening(by_radius.len());
         jackknife(&by_radius, t * t)
     } else {
         Matrix2::zeros()
