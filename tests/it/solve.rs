@@ -1057,3 +1057,48 @@ fn a_disturbed_outline_is_covered_by_the_combined_light() {
         assert!(rel(f.sigma0_mm[c], t.sigma0_mm[c]) < 0.06, "σ0[{c}]");
     }
 }
+
+/// The sweep behind docs/uncertainty.md's composite row, run by hand (about 3 minutes on 2
+/// cores): issue 34's composite ([`composite_with_stand`]) on seeds 1–8 with stands 4, 8 and
+/// 14 px wide. Measured (2026-12-04): light 0.045–0.288° off at 0.8–3.1 of its stated std (23 of
+/// 24 within 3), σ0 0.5–4.5% low within 1.2 std. Asserted: at least 22 of 24 lights within 3
+/// std and none beyond 3.5, every σ0 within 1.5 std.
+#[test]
+#[ignore = "by hand: cargo test --release --test it -- --ignored solve::disturbed_outlines_over_seeds --nocapture"]
+fn disturbed_outlines_over_seeds() {
+    let (mut within, mut worst_light, mut worst_sigma) = (0, 0.0f64, 0.0f64);
+    for width in [4.0, 8.0, 14.0] {
+        for seed in 1..=8u64 {
+            let dir = tempfile::tempdir().unwrap();
+            let cfg = SessionConfig {
+                seed,
+                ..SessionConfig::default()
+            };
+            session::generate(&cfg, dir.path(), None, true).unwrap();
+            composite_with_stand(dir.path(), width, 0.3);
+            let t = truth(dir.path());
+            let f = solve_with(dir.path(), "fit.json", |o| o.quiet = true);
+            let z = light_err(&f, &t) / f.std.light_deg;
+            let zs = (0..3)
+                .map(|c| ((f.sigma0_mm[c] - t.sigma0_mm[c]) / f.std.sigma0_mm[c]).abs())
+                .fold(0.0, f64::max);
+            println!(
+                "stand {width} px, seed {seed}: light {:.3}° ± {:.3}° ({z:.1} std), σ0 worst {zs:.1} std, {:.2?}% off",
+                light_err(&f, &t),
+                f.std.light_deg,
+                (0..3)
+                    .map(|c| 100.0 * (f.sigma0_mm[c] / t.sigma0_mm[c] - 1.0))
+                    .collect::<Vec<_>>()
+            );
+            within += (z <= 3.0) as usize;
+            worst_light = worst_light.max(z);
+            worst_sigma = worst_sigma.max(zs);
+        }
+    }
+    println!("lights within 3 std: {within} of 24; worst {worst_light:.1}; σ0 worst {worst_sigma:.1} std");
+    assert!(
+        within >= 22 && worst_light < 3.5,
+        "{within} of 24, worst {worst_light}"
+    );
+    assert!(worst_sigma < 1.5, "σ0 {worst_sigma}");
+}
