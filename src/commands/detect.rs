@@ -91,9 +91,15 @@ impl fmt::Display for Detected {
         match (&d.light_direction, d.light) {
             (Some(l), _) => writeln!(
                 f,
-                "light    session {} ± {:.3}°",
+                "light    session {} ± {:.3}°{}",
                 deg(l),
-                d.light_std_deg.unwrap_or(f64::NAN)
+                d.light_std_deg.unwrap_or(f64::NAN),
+                match d.light_scatter_deg {
+                    Some(t) if t > 0.0 => {
+                        format!(" (the spheres scatter {t:.3}° beyond their own errors)")
+                    }
+                    _ => String::new(),
+                }
             )?,
             (None, workbench::formats::session::LightMode::Shared) => {
                 writeln!(f, "light    none: no usable highlight on any sphere")?

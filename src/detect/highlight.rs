@@ -903,6 +903,9 @@ pub struct Combined {
     pub cov: Matrix3<f64>,
     /// Per estimate: whether it was rejected as an outlier.
     pub outlier: Vec<bool>,
+    /// How far each kept estimate scatters beyond its own error (radians, isotropic): the
+    /// random-effects τ of [`combine`], 0 where they agree within their errors.
+    pub tau: f64,
 }
 
 impl Combined {
@@ -934,10 +937,26 @@ pub(crate) fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combin
     Some(c)
 }
 
-/// Combine light estimates: IRLS with Huber weights on the Mahalanobis distance (each covariance
-/// floored at `floor` radians, a modelling error the statistics do not see), starting from the
-/// medoid; estimates beyond 5σ are outliers. The combined covariance is inflated by the reduced
-/// χ² when the estimates scatter more than their errors say.
+/// Combine light estimates, each with its covariance floored at `floor` radians (a modelling
+/// error the statistics do not see):
+///
+/// 1. **Outliers**: IRLS with Huber weights on the Mahalanobis distance, from the medoid;
+///    estimates beyond 5σ are set aside while they are a minority of at most ⌊(n − 1)/3⌋ (one
+///    of three to six spheres; none of two).
+/// 2. **Errors that scale with the stated ones** (the usual case: the kept estimates agree, or
+///    scatter in proportion to their errors): the Huber-weighted mean, its covariance inflated
+///    by the reduced χ² (the Birge ratio) where the scatter exceeds the errors.
+/// 3. **Scatter beyond every error**: where more than that minority lies beyond 5σ, the spheres
+///    are not a few broken ones but each moved its own way by something the formal errors do
+///    not see (a disturbed outline: a composited backdrop, a stand, a shadow). Setting most of
+///    them aside would keep whichever few happen to agree, with those few's small errors. So
+///    every estimate is kept and combined as a random-effects mean: each covariance plus τ²
+///    (isotropic in the tangent plane), τ² chosen so that the scatter's χ² equals its 2(n − 1)
+///    degrees of freedom (Paule–Mandel). The estimates then weigh nearly alike and the stated
+///    error is their scatter's.
+///
+/// `Combined::tau` is the Paule–Mandel τ of the kept estimates in either case (0 where they
+/// agree within their errors).
 pub(crate) fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Option<Combined> {
     if est.is_empty() {
         return None;
@@ -950,46 +969,16 @@ pub(crate) fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Optio
             sa.total_cmp(&sb)
         })?
         .0;
+    let n = est.len();
+    let mut excluded = vec![false; n];
     let mut m = medoid;
-    let mut info = Matrix2::zeros();
-    let mut weights = vec![1.0; est.len()];
-    let mut r = vec![0.0; est.len()];
-    let mut excluded = vec![false; est.len()];
+    // How many lie beyond 5σ: those set aside, and those the last round would set aside.
+    let mut beyond = 0;
     for _round in 0..5 {
-        for _ in 0..50 {
-            let (e1, e2) = tangent_basis(&m);
-            let e = Matrix3x2::from_columns(&[e1, e2]);
-            info = Matrix2::zeros();
-            let mut rhs = Vector2::zeros();
-            for (i, (l, c)) in est.iter().enumerate() {
-                // Residual and weight in the estimate's own tangent plane (its covariance is
-                // degenerate along l, which another plane would not see), mapped to m's plane.
-                let (f1, f2) = tangent_basis(l);
-                let ei = Matrix3x2::from_columns(&[f1, f2]);
-                let d = ei.transpose() * (l - m);
-                let c2 = ei.transpose() * c * ei + Matrix2::identity() * floor * floor;
-                let wm = c2.try_inverse()?;
-                let jm = ei.transpose() * e;
-                r[i] = (d.transpose() * wm * d)[0].max(0.0).sqrt();
-                weights[i] = if excluded[i] {
-                    0.0
-                } else if r[i] > 2.5 {
-                    2.5 / r[i]
-                } else {
-                    1.0
-                };
-                info += jm.transpose() * wm * jm * weights[i];
-                rhs += jm.transpose() * wm * d * weights[i];
-            }
-            let step = info.try_inverse()? * rhs;
-            m = (m + e * step).normalize();
-            if step.norm() < 1e-14 {
-                break;
-            }
-        }
-        let newly: Vec<usize> = (0..est.len())
-            .filter(|&i| !excluded[i] && r[i] > 5.0)
-            .collect();
+        let (mean, _, r) = weighted_mean(est, &excluded, m, floor * floor, true)?;
+        m = mean;
+        let newly: Vec<usize> = (0..n).filter(|&i| !excluded[i] && r[i] > 5.0).collect();
+        beyond = excluded.iter().filter(|&&x| x).count() + newly.len();
         if newly.is_empty() || excluded.iter().filter(|&&x| !x).count() <= newly.len() {
             break;
         }
@@ -997,21 +986,127 @@ pub(crate) fn combine(est: &[(Vector3<f64>, Matrix3<f64>)], floor: f64) -> Optio
             excluded[i] = true;
         }
     }
+    let scattered = beyond > if n >= 3 { ((n - 1) / 3).max(1) } else { 0 };
+    if scattered {
+        excluded = vec![false; n];
+    }
+    let kept = excluded.iter().filter(|&&x| !x).count();
+    let dof = 2.0 * (kept as f64 - 1.0);
+    let (tau2, (mut m, mut info, _)) = paule_mandel(est, &excluded, m, floor, dof)?;
+    if !scattered {
+        let r;
+        (m, info, r) = weighted_mean(est, &excluded, m, floor * floor, true)?;
+        let chi2: f64 = r
+            .iter()
+            .zip(&excluded)
+            .filter(|(_, &x)| !x)
+            .map(|(&r, _)| if r > 2.5 { 2.5 * r } else { r * r })
+            .sum();
+        if kept > 1 {
+            info /= (chi2 / dof).max(1.0);
+        }
+    }
     let (e1, e2) = tangent_basis(&m);
     let e = Matrix3x2::from_columns(&[e1, e2]);
-    let n = excluded.iter().filter(|&&x| !x).count();
-    let chi2: f64 = r.iter().zip(&weights).map(|(r, w)| w * r * r).sum();
-    let inflate = if n > 1 {
-        (chi2 / (2.0 * (n as f64 - 1.0))).max(1.0)
-    } else {
-        1.0
-    };
-    let c2 = info.try_inverse()? * inflate;
     Some(Combined {
         light: m,
-        cov: e * c2 * e.transpose(),
+        cov: e * info.try_inverse()? * e.transpose(),
         outlier: excluded,
+        tau: tau2.sqrt(),
     })
+}
+
+/// The Paule–Mandel τ² of the estimates not `excluded`: 0 where their χ² about the weighted mean
+/// is within `dof`, else the τ² at which it equals `dof` (χ² falls monotonically in τ²: bracketed
+/// by quadrupling, then bisected in log τ²). With it, the random-effects mean
+/// ([`weighted_mean`] with the covariances plus τ² + floor²).
+#[allow(clippy::type_complexity)]
+fn paule_mandel(
+    est: &[(Vector3<f64>, Matrix3<f64>)],
+    excluded: &[bool],
+    m: Vector3<f64>,
+    floor: f64,
+    dof: f64,
+) -> Option<(f64, (Vector3<f64>, Matrix2<f64>, Vec<f64>))> {
+    let chi2_at = |tau2: f64| {
+        weighted_mean(est, excluded, m, floor * floor + tau2, false).map(|(m, info, r)| {
+            let chi2 = r
+                .iter()
+                .zip(excluded)
+                .filter(|(_, &x)| !x)
+                .map(|(r, _)| r * r);
+            let chi2 = chi2.sum::<f64>();
+            (chi2, (m, info, r))
+        })
+    };
+    let (chi2, at_zero) = chi2_at(0.0)?;
+    if dof <= 0.0 || chi2 <= dof {
+        return Some((0.0, at_zero));
+    }
+    let spread = est
+        .iter()
+        .zip(excluded)
+        .filter(|(_, &x)| !x)
+        .map(|(e, _)| e.0.angle(&at_zero.0).powi(2))
+        .sum::<f64>()
+        / (dof / 2.0 + 1.0);
+    let (mut lo, mut hi) = (spread * 1e-6, spread.max(1e-18));
+    while chi2_at(hi)?.0 > dof {
+        hi *= 4.0;
+    }
+    for _ in 0..60 {
+        let mid = (lo * hi).sqrt();
+        if chi2_at(mid)?.0 > dof {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some((hi, chi2_at(hi)?.1))
+}
+
+/// The weighted mean of the estimates not `excluded` (Newton steps in the tangent plane from
+/// `m`), each with its covariance plus `var` times the identity, Huber-weighted at 2.5σ when
+/// `huber`: the mean, its information matrix (in `tangent_basis(mean)`) and every estimate's
+/// Mahalanobis distance from it.
+fn weighted_mean(
+    est: &[(Vector3<f64>, Matrix3<f64>)],
+    excluded: &[bool],
+    mut m: Vector3<f64>,
+    var: f64,
+    huber: bool,
+) -> Option<(Vector3<f64>, Matrix2<f64>, Vec<f64>)> {
+    let mut r = vec![0.0; est.len()];
+    let mut info = Matrix2::zeros();
+    for _ in 0..50 {
+        let (e1, e2) = tangent_basis(&m);
+        let e = Matrix3x2::from_columns(&[e1, e2]);
+        info = Matrix2::zeros();
+        let mut rhs = Vector2::zeros();
+        for (i, (l, c)) in est.iter().enumerate() {
+            // Residual and weight in the estimate's own tangent plane (its covariance is
+            // degenerate along l, which another plane would not see), mapped to m's plane.
+            let (f1, f2) = tangent_basis(l);
+            let ei = Matrix3x2::from_columns(&[f1, f2]);
+            let d = ei.transpose() * (l - m);
+            let wm = (ei.transpose() * c * ei + Matrix2::identity() * var).try_inverse()?;
+            let jm = ei.transpose() * e;
+            r[i] = (d.transpose() * wm * d)[0].max(0.0).sqrt();
+            let w = match (excluded[i], huber && r[i] > 2.5) {
+                (true, _) => 0.0,
+                (false, true) => 2.5 / r[i],
+                (false, false) => 1.0,
+            };
+            info += jm.transpose() * wm * jm * w;
+            rhs += jm.transpose() * wm * d * w;
+        }
+        let step = info.try_inverse()? * rhs;
+        m = (m + e * step).normalize();
+        if step.norm() < 1e-14 {
+            break;
+        }
+    }
+    Some((m, info, r))
 }
 
 #[cfg(test)]
@@ -1134,5 +1229,51 @@ mod tests {
         assert_eq!(k.outlier, [false, false, false, false, true]);
         // Four unit-σ estimates: combined σ ≈ s/2 (scatter consistent, no inflation).
         assert!((k.std() - s / 2.0).abs() < 0.2 * s, "{}", k.std());
+    }
+
+    /// Five estimates whose scatter (about 10 of their errors) is systematic, not a few broken
+    /// ones: none is set aside, they weigh alike (the best one does not win), and the stated error
+    /// is the scatter's: for five points of one spread s in the plane, the random-effects mean's
+    /// std is (Σ|d|²/(2·4))^½/√5 by the Paule–Mandel condition, computed here independently.
+    #[test]
+    fn combine_widens_for_estimates_that_scatter_beyond_their_errors() {
+        let truth = Vector3::new(0.3, -0.4, -0.8).normalize();
+        let (e1, e2) = tangent_basis(&truth);
+        let offs = [
+            (0.4, 0.1),
+            (0.3, -0.2),
+            (0.0, 0.05),
+            (-0.2, 0.25),
+            (-0.5, -0.2),
+        ];
+        let sig = [0.015, 0.02, 0.024, 0.031, 0.04];
+        let deg = std::f64::consts::PI / 180.0;
+        let est: Vec<_> = offs
+            .iter()
+            .zip(sig)
+            .map(|(&(a, b), s)| {
+                let l = (truth + (e1 * a + e2 * b) * deg).normalize();
+                let (f1, f2) = tangent_basis(&l);
+                (
+                    l,
+                    (f1 * f1.transpose() + f2 * f2.transpose()) * (s * deg).powi(2),
+                )
+            })
+            .collect();
+        let k = combine(&est, 0.0).unwrap();
+        assert_eq!(k.outlier, [false; 5]);
+        // The plain mean of the offsets is (0, 0): with τ ≫ the errors the weights are nearly equal.
+        assert!(
+            k.light.angle(&truth) / deg < 0.01,
+            "{}",
+            k.light.angle(&truth) / deg
+        );
+        let ss: f64 = offs.iter().map(|(a, b)| a * a + b * b).sum();
+        let expected = (ss / 8.0).sqrt() / 5f64.sqrt();
+        let got = k.std() / deg;
+        assert!(
+            (got / expected - 1.0).abs() < 0.1,
+            "{got} against {expected}"
+        );
     }
 }

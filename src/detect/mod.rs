@@ -1,5 +1,5 @@
 //! `workbench detect <session>/`: find every sphere of every photo, its highlight, and the light
-//! direction; write `detections.json` (schema `workbench.detections/1`) and an overlay per photo.
+//! direction; write `detections.json` (schema `workbench.detections/2`) and an overlay per photo.
 //!
 //! Per photo: the background level and noise (median, MAD) → a mask of what is clearly brighter →
 //! connected blobs, of which the ones carrying at least 5% of the largest one's light are the
@@ -792,6 +792,7 @@ pub fn run_decoded(
         light: sess.light,
         light_direction: session_light.as_ref().map(|c| arr3(&c.light)),
         light_std_deg: session_light.as_ref().map(|c| c.std().to_degrees()),
+        light_scatter_deg: session_light.as_ref().map(|c| c.tau.to_degrees()),
         light_azimuth_deg: angles.map(|a| a.azimuth.to_degrees()),
         light_elevation_deg: angles.map(|a| a.elevation.to_degrees()),
         images,

@@ -1,4 +1,4 @@
-//! `detections.json` (schema `workbench.detections/1`): what `workbench detect` found in a
+//! `detections.json` (schema `workbench.detections/2`): what `workbench detect` found in a
 //! session's photos — each sphere's outline and highlight, each photo's light and the session's —
 //! as the fit and the renderer's check read it.
 
@@ -8,7 +8,7 @@ use crate::formats::session::LightMode;
 use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-pub(crate) const SCHEMA: &str = "workbench.detections/1";
+pub(crate) const SCHEMA: &str = "workbench.detections/2";
 
 /// A fitted outline, as stored.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -128,6 +128,10 @@ pub struct Detections {
     /// Combined over the session (null under `"light": "per-image"` or without highlights).
     pub light_direction: Option<[f64; 3]>,
     pub light_std_deg: Option<f64>,
+    /// How far each sphere's light scatters beyond its own error (degrees; 0 where they agree;
+    /// null without a session light): a disturbed outline or highlight. Included in
+    /// `light_std_deg` (`detect::highlight::combine`).
+    pub light_scatter_deg: Option<f64>,
     /// Azimuth and elevation of the combined light (degrees; see `model::LightAngles`).
     pub light_azimuth_deg: Option<f64>,
     pub light_elevation_deg: Option<f64>,

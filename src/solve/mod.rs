@@ -11,6 +11,7 @@
 use crate::error::{Error, Result};
 use crate::fit::joint;
 use crate::fit::observe::SphereData;
+use crate::formats::detections::Detections;
 use crate::formats::fit::{FitFile, Method};
 use crate::formats::session;
 use std::path::Path;
@@ -72,7 +73,10 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         .unwrap_or_else(|| l.report.session_file.with_file_name("fit.json"));
     check_holdout(opts, &l)?;
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
-    let mut notes: Vec<String> = unfitted_floor_note(opts, &l).into_iter().collect();
+    let mut notes: Vec<String> = unfitted_floor_note(opts, &l)
+        .into_iter()
+        .chain(scattered_highlights_note(&l.detections))
+        .collect();
     let t_solve = Instant::now();
     if opts.method == Method::Joint {
         fit_intensities(opts, &mut l, is_held);
@@ -145,6 +149,28 @@ fn check_holdout(opts: &Options, l: &Loaded) -> Result<()> {
 }
 
 /// The note for photos whose dark floor was neither measured nor fitted.
+/// Where the spheres' highlights give lights that scatter beyond their own errors by more than
+/// a typical sphere's error (`light_scatter_deg`, `detect::highlight::combine`): say so, and that
+/// the highlights' light error includes it.
+fn scattered_highlights_note(d: &Detections) -> Option<String> {
+    let tau = d.light_scatter_deg?;
+    let typical = crate::stats::percentile(
+        d.images
+            .iter()
+            .flat_map(|i| &i.spheres)
+            .filter(|s| s.highlight.as_ref().is_some_and(|h| !h.outlier))
+            .filter_map(|s| s.light_std_deg)
+            .collect(),
+        0.5,
+    );
+    (tau > typical).then(|| {
+        format!(
+            "the spheres' highlights disagree: each sphere's light lies {tau:.2}° from the others' beyond its own error (± {typical:.3}° typical), as a disturbed outline or highlight makes them (a stand, a backdrop edge, a shadow, an occlusion); the highlights' light error (± {:.3}°) includes that scatter",
+            d.light_std_deg.unwrap_or(f64::NAN)
+        )
+    })
+}
+
 fn unfitted_floor_note(opts: &Options, l: &Loaded) -> Option<String> {
     // A photo whose surroundings are lit (a backdrop, a table) gives no dark floor to subtract.
     let unmeasured: Vec<&str> = {

@@ -269,7 +269,7 @@ fn detect_writes_detections_and_overlays_and_refuses_a_wrong_count() {
     let det: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("detections.json")).unwrap())
             .unwrap();
-    assert_eq!(det["schema"], "workbench.detections/1");
+    assert_eq!(det["schema"], "workbench.detections/2");
     assert_eq!(det["images"][0]["spheres"].as_array().unwrap().len(), 2);
     assert!(out.join("overlays/row.png").is_file());
     // The session lists one sphere too few.

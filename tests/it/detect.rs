@@ -49,7 +49,7 @@ fn synthetic_session_silhouettes_light_and_samples() {
     session::generate(&cfg, dir.path(), None, true).unwrap();
     let d = run(dir.path()).unwrap();
     let t = truth(dir.path());
-    assert_eq!(d.schema, "workbench.detections/1");
+    assert_eq!(d.schema, "workbench.detections/2");
     assert_eq!(d.projection, "perspective");
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for (im, ti) in d.images.iter().zip(&t.images) {
@@ -369,6 +369,39 @@ fn diligent_ball_lights() {
     );
     // Measured 0.61° / 0.63° / 1.27°; a plain saturated-blob centroid on the same outline 0.73°.
     assert!(mean < 0.7 && max < 1.4, "mean {mean} max {max}");
+    // Most of it is one rotation shared by every photo (the frame: a sub-pixel bias of the ball's
+    // outline, or of the chrome sphere DiLiGenT calibrated with, turns every light alike). After
+    // the rotation that best aligns the 48 lights with the calibrated ones (Kabsch: 3 of 96
+    // numbers), they agree to 0.354° mean (measured), a rotation of 0.557°.
+    let pairs: Vec<(Vector3<f64>, Vector3<f64>)> = d
+        .images
+        .iter()
+        .zip(&truth)
+        .map(|(im, t)| {
+            (
+                Vector3::from(im.light_direction.unwrap()).normalize(),
+                Vector3::from(*t).normalize(),
+            )
+        })
+        .collect();
+    let h: nalgebra::Matrix3<f64> = pairs.iter().map(|(a, b)| a * b.transpose()).sum();
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let sign = (vt.transpose() * u.transpose()).determinant().signum();
+    let r = vt.transpose()
+        * nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, sign))
+        * u.transpose();
+    let aligned = pairs
+        .iter()
+        .map(|(a, b)| (r * a).angle(b).to_degrees())
+        .sum::<f64>()
+        / pairs.len() as f64;
+    let turn = nalgebra::Rotation3::from_matrix(&r).angle().to_degrees();
+    println!("after one shared rotation of {turn:.3}°: mean {aligned:.3}°");
+    assert!(
+        aligned < 0.45 && turn > 0.3,
+        "aligned {aligned}°, rotation {turn}°"
+    );
 }
 
 /// Clipped highlights are data: a rough-ish lobe (α 0.1–0.15) exposed so that 5–30% of every disc

@@ -460,10 +460,14 @@ fn heavy_noise_and_outliers() {
     );
     let truth = config(|_| {}).material.sigma0_mm;
     assert!(sigma_error_in_std(o.1.as_ref().unwrap(), truth, "20% noise") < 3.0);
-    // 5% outlier pixels, ten draws. Measured: σ0 off by 1–21% (median 6%, always high), the light
-    // by 0.04–1.04°, with the impulses left out (src/fit/observe.rs; the residuals fall from
+    // 5% outlier pixels, ten draws. Measured: σ0 off by 3–36% (median 6.4%, high on nine), the
+    // light by 0.04–1.2°, with the impulses left out (src/fit/observe.rs; the residuals fall from
     // about 10% to 5% of the data, σ0 barely moves: the bias is not the fitted pixels'). The fit
-    // says so: its stated std covers every error (at most 1.9 of it; 3 allowed).
+    // says so: its stated std covers every error (at most 1.1 of it; 3 allowed). The worst draw
+    // (seed 3, 36%) is one where the impulses move the three highlights' lights 5.6° apart, far
+    // beyond their errors: the detector keeps all three (a random-effects mean, ± 3.4°: before
+    // 2026-12-04 it kept whichever one sphere agreed with itself, and σ0 was at most 21% off), and
+    // a note says the highlights disagree.
     let mut errors = vec![];
     for seed in 1..=10u64 {
         let name = format!("5% outliers, seed {seed}");
@@ -476,7 +480,7 @@ fn heavy_noise_and_outliers() {
             WORST_OUTLIER_ERROR,
             1.5,
         );
-        // Not an accurate measurement (σ0 up to 21% off) but a converged one, honest about it.
+        // Not an accurate measurement (σ0 up to 36% off) but a converged one, honest about it.
         let f = o.1.unwrap();
         assert!(f.convergence.converged, "{name}: not converged");
         let truth = config(|_| {}).material.sigma0_mm;
@@ -486,17 +490,26 @@ fn heavy_noise_and_outliers() {
                 .fold(0.0, f64::max),
         );
         assert!(sigma_error_in_std(&f, truth, &name) < 3.0, "{name}");
+        if *errors.last().unwrap() > 0.21 {
+            assert!(
+                f.notes
+                    .iter()
+                    .any(|n| n.starts_with("the spheres' highlights disagree")),
+                "{name}: {:?}",
+                f.notes
+            );
+        }
     }
     println!("5% outliers: σ0 errors over ten draws {errors:.4?}");
-    // Measured (2026-12-04): 0.9–20.7%, median 6.0%.
+    // Measured (2026-12-04, late): 2.8–36.3%, median 6.4%.
     errors.sort_by(f64::total_cmp);
     assert!(errors[9] < WORST_OUTLIER_ERROR, "{errors:?}");
     assert!(errors[4] < 0.12, "median {errors:?}");
 }
 
-/// The largest σ0 error accepted over the ten outlier draws (21% measured): a cap on an error
+/// The largest σ0 error accepted over the ten outlier draws (36% measured): a cap on an error
 /// the fit's stated std must cover (checked per draw), not a claim of accuracy.
-const WORST_OUTLIER_ERROR: f64 = 0.3;
+const WORST_OUTLIER_ERROR: f64 = 0.45;
 
 #[test]
 fn one_radius_and_two_identical_radii() {
