@@ -4,12 +4,15 @@
 //! here).
 
 pub mod cdrf;
+pub mod dipole;
 pub mod entry;
 pub mod fresnel;
 pub mod lanes;
 pub mod mixture;
+pub mod quadrature;
 mod radiance;
 pub mod specular;
+pub mod sphere_profile;
 pub mod table;
 
 pub use radiance::*;

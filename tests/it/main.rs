@@ -15,6 +15,7 @@ mod export;
 mod geometry;
 mod hostile;
 mod layout;
+mod medium;
 mod model;
 mod pbr;
 mod photo;
