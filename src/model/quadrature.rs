@@ -16,14 +16,25 @@ const WEIGHTS: [f64; 4] = [
     0.101_228_536_290_376_3,
 ];
 
+/// The 8-point rule's nodes and weights on [a, b].
+pub fn nodes(a: f64, b: f64) -> [(f64, f64); 8] {
+    let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
+    std::array::from_fn(|k| {
+        let (x, w) = (NODES[k % 4], WEIGHTS[k % 4] * half);
+        (
+            if k < 4 {
+                mid - half * x
+            } else {
+                mid + half * x
+            },
+            w,
+        )
+    })
+}
+
 /// ∫ₐᵇ f by the 8-point rule (exact for polynomials up to degree 15).
 pub fn gauss_legendre(a: f64, b: f64, f: impl Fn(f64) -> f64) -> f64 {
-    let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
-    half * NODES
-        .iter()
-        .zip(WEIGHTS)
-        .map(|(x, w)| w * (f(mid - half * x) + f(mid + half * x)))
-        .sum::<f64>()
+    nodes(a, b).iter().map(|&(x, w)| w * f(x)).sum()
 }
 
 /// ∫ₐᵇ f over `n` equal panels.
