@@ -941,8 +941,8 @@ pub(crate) fn combine_highlights(hs: &[&Highlight], floor: f64) -> Option<Combin
 /// error the statistics do not see):
 ///
 /// 1. **Outliers**: IRLS with Huber weights on the Mahalanobis distance, from the medoid;
-///    estimates beyond 5σ are set aside while they are a minority of at most ⌊(n − 1)/3⌋ (one
-///    of three to six spheres; none of two).
+///    estimates beyond 5σ are set aside while they are a minority of at most
+///    max(1, ⌊(n − 1)/3⌋) of n ≥ 3 (one of three to six spheres; none of two).
 /// 2. **Errors that scale with the stated ones** (the usual case: the kept estimates agree, or
 ///    scatter in proportion to their errors): the Huber-weighted mean, its covariance inflated
 ///    by the reduced χ² (the Birge ratio) where the scatter exceeds the errors.

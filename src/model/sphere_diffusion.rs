@@ -30,6 +30,7 @@ impl SphereDiffusion {
     /// source shell's reach, (ρ/R)^l = e^{−l z_r/R} roughly, falls below 1e-12.
     pub fn new(medium: &Medium, radius: f64) -> SphereDiffusion {
         let z_r = 1.0 / medium.sigma_t_reduced();
+        // A sphere smaller than twice the source depth keeps its shell at half its radius.
         let rho = (radius - z_r).max(0.5 * radius);
         let kappa = medium.sigma_tr();
         let f_dr = diffuse_fresnel_reflectance(medium.eta);
