@@ -3,6 +3,7 @@
 //! deviation that the detector, the noise model, the Huber weights and the calibration's outlier
 //! test share.
 
+use nalgebra::{SMatrix, SVector};
 use std::f64::consts::PI;
 
 /// P(|T| ≤ t) for Student's t with `dof` degrees of freedom (integer, ≥ 1), in closed form
@@ -97,6 +98,18 @@ pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     }
     let k = ((v.len() - 1) as f64 * q).round() as usize;
     *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+}
+
+/// The jackknife covariance of `n` leave-one-out estimates, (n − 1)/n Σ (θᵢ − θ̄)(θᵢ − θ̄)ᵀ
+/// (unwidened; [`jackknife_widening`] gives the factor for its standard errors).
+pub fn jackknife_covariance<const D: usize>(estimates: &[SVector<f64, D>]) -> SMatrix<f64, D, D> {
+    let n = estimates.len() as f64;
+    let mean = estimates.iter().sum::<SVector<f64, D>>() / n;
+    estimates
+        .iter()
+        .map(|v| (v - mean) * (v - mean).transpose())
+        .sum::<SMatrix<f64, D, D>>()
+        * ((n - 1.0) / n)
 }
 
 /// The factor a jackknife's standard error from `n` leave-one-out estimates is widened by,

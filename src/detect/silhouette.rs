@@ -755,13 +755,8 @@ fn arc_jackknife(
     if n < 4 {
         return None;
     }
-    let mean = estimates.iter().sum::<Vector3<f64>>() / n as f64;
     let widen = crate::stats::jackknife_widening(n);
-    let scatter: Matrix3<f64> = estimates
-        .iter()
-        .map(|e| (e - mean) * (e - mean).transpose())
-        .sum();
-    Some(scatter * ((n - 1) as f64 / n as f64) * widen * widen)
+    Some(crate::stats::jackknife_covariance(&estimates) * (widen * widen))
 }
 
 /// Refine an outline with the edge model on a band `inner_px` inside to `outer_px` outside the

@@ -52,16 +52,23 @@ impl SphereDiffusion {
 
     /// M(θ) at cos θ: the exitance per unit irradiance (Legendre series by its recurrence).
     pub fn m(&self, cos_theta: f64) -> f64 {
-        let x = cos_theta.clamp(-1.0, 1.0);
-        let (mut p_prev, mut p) = (1.0, x);
-        let mut sum = self.coefficients[0];
-        for (l, c) in self.coefficients.iter().enumerate().skip(1) {
-            sum += c * p;
-            let next = ((2 * l + 1) as f64 * x * p - l as f64 * p_prev) / (l + 1) as f64;
-            (p_prev, p) = (p, next);
-        }
-        sum
+        self.coefficients
+            .iter()
+            .zip(legendre(cos_theta.clamp(-1.0, 1.0)))
+            .map(|(c, p)| c * p)
+            .sum()
     }
+}
+
+/// P_0(x), P_1(x), P_2(x), … by Bonnet's recurrence, (l + 1) P_{l+1} = (2l + 1) x P_l − l P_{l−1}.
+fn legendre(x: f64) -> impl Iterator<Item = f64> {
+    let mut state = (0usize, 1.0, x);
+    std::iter::from_fn(move || {
+        let (l, p, next) = state;
+        let after = ((2 * l + 3) as f64 * x * next - (l + 1) as f64 * p) / (l + 2) as f64;
+        state = (l + 1, next, after);
+        Some(p)
+    })
 }
 
 /// The Legendre coefficients f_l (l ≤ `order`) of the light entering at cos θ = μ,
@@ -77,12 +84,8 @@ fn entry_legendre(eta: f64, order: usize) -> Vec<f64> {
         for (theta, w) in nodes(k as f64 * h, (k + 1) as f64 * h) {
             let mu = theta.cos();
             let g = fresnel::transmission(mu, eta) * mu * theta.sin() * w;
-            let (mut p_prev, mut p) = (1.0, mu);
-            f[0] += g;
-            for (l, fl) in f.iter_mut().enumerate().skip(1) {
+            for (fl, p) in f.iter_mut().zip(legendre(mu)) {
                 *fl += g * p;
-                let next = ((2 * l + 1) as f64 * mu * p - l as f64 * p_prev) / (l + 1) as f64;
-                (p_prev, p) = (p, next);
             }
         }
     }

@@ -96,11 +96,11 @@ pub(crate) fn shading_light(jf: &JointFit, fitted: &[&SphereData]) -> Option<Sha
     if lefts.len() < 2 {
         return None;
     }
-    let regions = jackknife(&lefts, 1.0);
+    let regions = crate::stats::jackknife_covariance(&lefts);
     // The radii's as the fit's own jackknife widens it (t(n − 1)/2: src/fit/joint/jackknife.rs).
     let radii_cov = if by_radius.len() >= 3 {
         let t = crate::stats::jackknife_widening(by_radius.len());
-        jackknife(&by_radius, t * t)
+        crate::stats::jackknife_covariance(&by_radius) * (t * t)
     } else {
         Matrix2::zeros()
     };
@@ -144,15 +144,3 @@ fn step_without(less: &Normal, all: &Normal, (a, e): (usize, usize)) -> Option<V
 /// A parameter keeps at least this fraction of its information (JᵀJ's diagonal) without a
 /// region, or is held at the fit in that region's leave-out step.
 const KEPT_INFORMATION: f64 = 0.1;
-
-/// The jackknife covariance of leave-one-out estimates, (n − 1)/n Σ (θᵢ − θ̄)(θᵢ − θ̄)ᵀ, times
-/// `widen`.
-fn jackknife(estimates: &[Vector2<f64>], widen: f64) -> Matrix2<f64> {
-    let n = estimates.len() as f64;
-    let mean = estimates.iter().sum::<Vector2<f64>>() / n;
-    estimates
-        .iter()
-        .map(|v| (v - mean) * (v - mean).transpose())
-        .sum::<Matrix2<f64>>()
-        * ((n - 1.0) / n * widen)
-}
