@@ -5,6 +5,7 @@
 
 pub mod checkerboard;
 pub mod dielectric;
+pub mod photon_tally;
 pub mod session;
 pub mod volpath;
 
