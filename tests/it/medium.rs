@@ -14,11 +14,11 @@ use workbench::model::sphere_profile::{over_sphere, radiance_factor};
 #[derive(Clone, Copy, Debug)]
 enum Predictor {
     /// The flat medium's dipole profile carried round the sphere by chord length.
-    DipoleOverSphere,
+    CarriedDipole,
     /// The diffusion equation solved in the sphere.
-    DiffusionInSphere,
+    ShellSources,
     /// The same with its sources along the refracted beams.
-    BeamInSphere,
+    BeamSources,
 }
 
 /// A physically based session's truth: per channel σa and σs′ (isotropic phase), η, the light
@@ -91,7 +91,7 @@ fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands
             let per_channel = std::array::from_fn(|c| {
                 let d = Dipole::new(&t.media[c]);
                 let sphere = match predictor {
-                    Predictor::BeamInSphere => SphereDiffusion::with_sources(
+                    Predictor::BeamSources => SphereDiffusion::with_sources(
                         &t.media[c],
                         s.radius_mm,
                         workbench::model::sphere_diffusion::Sources::Beam(4),
@@ -99,7 +99,7 @@ fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands
                     _ => SphereDiffusion::new(&t.media[c], s.radius_mm),
                 };
                 let m_of = |cos_theta: f64| match predictor {
-                    Predictor::DipoleOverSphere => over_sphere(
+                    Predictor::CarriedDipole => over_sphere(
                         |r| d.profile(r),
                         s.radius_mm,
                         cos_theta,
@@ -107,7 +107,7 @@ fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands
                         d.reach(),
                         d.z_r,
                     ),
-                    Predictor::DiffusionInSphere | Predictor::BeamInSphere => sphere.m(cos_theta),
+                    Predictor::ShellSources | Predictor::BeamSources => sphere.m(cos_theta),
                 };
                 // M(θ) tabulated every half degree, interpolated linearly.
                 let table: Vec<f64> = (0..=360)
@@ -162,9 +162,9 @@ fn profiles_against_the_renders() {
     }
     for (src, predictor) in sessions.iter().flat_map(|s| {
         [
-            Predictor::DipoleOverSphere,
-            Predictor::DiffusionInSphere,
-            Predictor::BeamInSphere,
+            Predictor::CarriedDipole,
+            Predictor::ShellSources,
+            Predictor::BeamSources,
         ]
         .map(|p| (s.clone(), p))
     }) {
