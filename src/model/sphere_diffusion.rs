@@ -22,7 +22,8 @@
 //! p (2l + 1)/(4πR²) P_l(cos Θ) [i_l(κr)/i_l(κR)]/den_l to the l-th coefficient, the shell's
 //! formula per unit of its area. Against the photon tally (src/synth/photon_tally.rs) it
 //! holds the shape of M(θ) from 0 to 90° within 3% where the shell misses by up to 86%
-//! (docs/medium.md, "Against the photon tally").
+//! (docs/medium.md, "Against the photon tally"). [`SphereDiffusion::corrected`] multiplies it by
+//! [`level_correction`], a least-squares fit of its level to the tally's.
 
 use crate::model::dipole::{diffuse_fresnel_reflectance, Medium};
 use crate::model::fresnel;
