@@ -58,12 +58,14 @@ pub fn level_terms(reduced_albedo: f64, eta: f64, sigma_t_radius: f64) -> [f64; 
     [s, s * eta, s * s, s * s * eta, s * x, s * s * x, 1.0, x]
 }
 
-/// The factor that brings the beam model to the photon tally's level, 1 + Σ c_k t_k.
+/// The factor that brings the beam model to the photon tally's level, 1 + Σ c_k t_k. Outside
+/// the range it was fitted on (α′ 0.6–0.999, η 1.3–1.6, σt′R 7.5–105) it is held at the
+/// range's edge rather than extrapolated.
 pub fn level_correction(medium: &Medium, radius: f64) -> f64 {
     let t = level_terms(
-        medium.reduced_albedo(),
-        medium.eta,
-        medium.sigma_t_reduced() * radius,
+        medium.reduced_albedo().clamp(0.6, 0.999),
+        medium.eta.clamp(1.3, 1.6),
+        (medium.sigma_t_reduced() * radius).clamp(7.5, 105.0),
     );
     1.0 + t.iter().zip(LEVEL_FIT).map(|(t, c)| t * c).sum::<f64>()
 }
