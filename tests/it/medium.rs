@@ -109,6 +109,23 @@ const BANDS: [(f64, f64); 6] = [
     (100.0, 180.0),
 ];
 
+/// A session loaded as `solve` loads it, quietly.
+fn load_quiet(dir: &Path) -> workbench::solve::Loaded {
+    workbench::solve::load(&{
+        let mut o = workbench::solve::Options::new(dir);
+        o.quiet = true;
+        o
+    })
+    .unwrap()
+}
+
+/// Whether a pixel is compared: away from the highlight (its half vector more than 25° from the
+/// normal) and the rim (φ within 75°, where the rough boundary and the outline's pixels rule).
+fn compared(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
+    let h = (light + v).normalize();
+    n.dot(&h) <= 25f64.to_radians().cos() && n.dot(v) >= 75f64.to_radians().cos()
+}
+
 /// Per channel, per θ band of [`BANDS`]: a mean ratio, or None.
 type PerChannelBands = [[Option<f64>; 6]; 3];
 
@@ -117,12 +134,7 @@ type PerChannelBands = [[Option<f64>; 6]; 3];
 /// normal) and the rim (φ beyond 75°, where the rough boundary and the outline's pixels rule).
 fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands)> {
     let t = truth(dir);
-    let loaded = workbench::solve::load(&{
-        let mut o = workbench::solve::Options::new(dir);
-        o.quiet = true;
-        o
-    })
-    .unwrap();
+    let loaded = load_quiet(dir);
     loaded
         .spheres
         .iter()
@@ -152,9 +164,8 @@ fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands
                 let mut sums = [(0.0, 0usize); 6];
                 for o in &s.obs {
                     let (n, v) = (o.geometry.normal, o.geometry.view);
-                    let h = (t.light + v).normalize();
                     let (cos_theta, cos_phi) = (n.dot(&t.light), n.dot(&v));
-                    if n.dot(&h) > 25f64.to_radians().cos() || cos_phi < 75f64.to_radians().cos() {
+                    if !compared(&n, &v, &t.light) {
                         continue;
                     }
                     let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
@@ -219,6 +230,38 @@ fn profiles_against_the_renders() {
     }
 }
 
+/// A medium of extinction σt and single-scattering albedo α with isotropic scattering
+/// (σs′ = σs), as the tally and the renders have it.
+fn medium_of(sigma_t: f64, albedo: f64, eta: f64) -> Medium {
+    Medium {
+        sigma_a: (1.0 - albedo) * sigma_t,
+        sigma_s_reduced: albedo * sigma_t,
+        eta,
+    }
+}
+
+/// The photon tally of one sphere behind a smooth boundary.
+fn smooth_tally(
+    radius: f64,
+    sigma_t: f64,
+    albedo: f64,
+    eta: f64,
+    photons: u64,
+    seed: u64,
+) -> workbench::synth::photon_tally::Tally {
+    workbench::synth::photon_tally::trace(
+        &workbench::synth::photon_tally::TallyScene {
+            radius,
+            sigma_t,
+            albedo,
+            eta,
+            alpha: 0.0,
+        },
+        photons,
+        seed,
+    )
+}
+
 /// The model's M(θ) averaged over a band of θ (uniform in cos θ, as the tally's area is).
 fn band_mean(model: &SphereDiffusion, lo_deg: usize, hi_deg: usize) -> f64 {
     let (c0, c1) = (
@@ -277,28 +320,13 @@ fn the_beam_sources_follow_the_photon_tally() {
 #[test]
 fn the_level_correction_holds_on_unseen_media() {
     use workbench::model::sphere_diffusion::Sources;
-    use workbench::synth::photon_tally::{trace, TallyScene};
     for (radius, sigma_t, albedo, eta) in [
         (20.0, 2.0, 0.75, 1.5),
         (30.0, 0.8, 0.92, 1.38),
         (18.0, 1.5, 0.985, 1.55),
     ] {
-        let tally = trace(
-            &TallyScene {
-                radius,
-                sigma_t,
-                albedo,
-                eta,
-                alpha: 0.0,
-            },
-            1_500_000,
-            21,
-        );
-        let m = Medium {
-            sigma_a: (1.0 - albedo) * sigma_t,
-            sigma_s_reduced: albedo * sigma_t,
-            eta,
-        };
+        let tally = smooth_tally(radius, sigma_t, albedo, eta, 1_500_000, 21);
+        let m = medium_of(sigma_t, albedo, eta);
         let e = tally.exitance(0, 60).value;
         let corrected = e / band_mean(&SphereDiffusion::corrected(&m, radius), 0, 60);
         let raw = e / band_mean(
@@ -346,11 +374,7 @@ fn diffusion_against_the_photon_tally() {
                         alpha: 0.0,
                     };
                     let t = trace(&scene, 2_000_000, 1);
-                    let m = Medium {
-                        sigma_a: (1.0 - albedo) * sigma_t,
-                        sigma_s_reduced: albedo * sigma_t,
-                        eta,
-                    };
+                    let m = medium_of(sigma_t, albedo, eta);
                     for v in [Sources::Shell, Sources::Beam(4)] {
                         let model = SphereDiffusion::with_sources(&m, radius, v);
                         let cells: Vec<String> = TALLY_BANDS
@@ -420,12 +444,7 @@ type Pixels = Vec<(f64, f64, f64, f64)>;
 
 /// The pixels the comparisons use (away from the highlight and the rim), per sphere and channel.
 fn fit_pixels(dir: &Path, t: &Truth) -> Vec<(f64, [Pixels; 3])> {
-    let loaded = workbench::solve::load(&{
-        let mut o = workbench::solve::Options::new(dir);
-        o.quiet = true;
-        o
-    })
-    .unwrap();
+    let loaded = load_quiet(dir);
     loaded
         .spheres
         .iter()
@@ -436,12 +455,12 @@ fn fit_pixels(dir: &Path, t: &Truth) -> Vec<(f64, [Pixels; 3])> {
                     .iter()
                     .filter_map(|o| {
                         let (n, v) = (o.geometry.normal, o.geometry.view);
-                        let h = (t.light + v).normalize();
-                        let (ct, cp) = (n.dot(&t.light), n.dot(&v));
-                        (n.dot(&h) <= 25f64.to_radians().cos()
-                            && cp >= 75f64.to_radians().cos()
-                            && o.weight[c] > 0.0)
-                            .then_some((ct, cp, o.radiance[c], o.weight[c]))
+                        (compared(&n, &v, &t.light) && o.weight[c] > 0.0).then_some((
+                            n.dot(&t.light),
+                            n.dot(&v),
+                            o.radiance[c],
+                            o.weight[c],
+                        ))
                     })
                     .collect()
             });
@@ -665,27 +684,12 @@ fn level_media() -> Vec<(f64, f64, f64, f64)> {
 fn level_against_the_photon_tally() {
     use nalgebra::{DMatrix, DVector};
     use workbench::model::sphere_diffusion::{level_terms, Sources, LEVEL_FIT};
-    use workbench::synth::photon_tally::{trace, TallyScene};
     let media = level_media();
     let rows: Vec<([f64; 8], f64)> = media
         .iter()
         .map(|&(radius, sigma_t, eta, albedo)| {
-            let t = trace(
-                &TallyScene {
-                    radius,
-                    sigma_t,
-                    albedo,
-                    eta,
-                    alpha: 0.0,
-                },
-                1_000_000,
-                11,
-            );
-            let m = Medium {
-                sigma_a: (1.0 - albedo) * sigma_t,
-                sigma_s_reduced: albedo * sigma_t,
-                eta,
-            };
+            let t = smooth_tally(radius, sigma_t, albedo, eta, 1_000_000, 11);
+            let m = medium_of(sigma_t, albedo, eta);
             let model = SphereDiffusion::with_sources(&m, radius, Sources::Beam(4));
             let ratio = t.exitance(0, 60).value / band_mean(&model, 0, 60);
             (level_terms(albedo, eta, sigma_t * radius), ratio)
@@ -763,11 +767,7 @@ fn rough_boundary_against_the_photon_tally() {
             alpha,
         };
         let t = trace(&scene, 2_000_000, 1);
-        let m = Medium {
-            sigma_a: (1.0 - albedo) * sigma_t,
-            sigma_s_reduced: albedo * sigma_t,
-            eta,
-        };
+        let m = medium_of(sigma_t, albedo, eta);
         let model = SphereDiffusion::corrected(&m, radius);
         let cells: Vec<String> = TALLY_BANDS
             .iter()
