@@ -27,6 +27,22 @@ pub struct Medium {
 }
 
 impl Medium {
+    /// A medium of extinction σt (1/mm) and single-scattering albedo α scattering isotropically
+    /// (σs′ = σs = α σt), as the photon tally and the physically based renders have it.
+    pub fn isotropic(sigma_t: f64, albedo: f64, eta: f64) -> Medium {
+        Medium {
+            sigma_a: (1.0 - albedo) * sigma_t,
+            sigma_s_reduced: albedo * sigma_t,
+            eta,
+        }
+    }
+
+    /// The boundary's internal reflection in diffusion theory, A = (1 + F_dr)/(1 − F_dr).
+    pub fn boundary_a(&self) -> f64 {
+        let f_dr = diffuse_fresnel_reflectance(self.eta);
+        (1.0 + f_dr) / (1.0 - f_dr)
+    }
+
     /// σt′ = σa + σs′ (1/mm); its inverse is the transport mean free path.
     pub fn sigma_t_reduced(&self) -> f64 {
         self.sigma_a + self.sigma_s_reduced
@@ -61,8 +77,7 @@ pub struct Dipole {
 
 impl Dipole {
     pub fn new(m: &Medium) -> Dipole {
-        let f_dr = diffuse_fresnel_reflectance(m.eta);
-        let a = (1.0 + f_dr) / (1.0 - f_dr);
+        let a = m.boundary_a();
         let z_r = 1.0 / m.sigma_t_reduced();
         Dipole {
             reduced_albedo: m.reduced_albedo(),

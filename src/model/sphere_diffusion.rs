@@ -25,7 +25,7 @@
 //! (docs/medium.md, "Against the photon tally"). [`SphereDiffusion::corrected`] multiplies it by
 //! [`level_correction`], a least-squares fit of its level to the tally's.
 
-use crate::model::dipole::{diffuse_fresnel_reflectance, Medium};
+use crate::model::dipole::Medium;
 use crate::model::fresnel;
 use crate::model::quadrature::nodes;
 
@@ -146,9 +146,7 @@ impl SphereDiffusion {
         // A sphere smaller than twice the source depth keeps its shell at half its radius.
         let rho = (radius - z_r).max(0.5 * radius);
         let kappa = medium.sigma_tr();
-        let f_dr = diffuse_fresnel_reflectance(medium.eta);
-        let a = (1.0 + f_dr) / (1.0 - f_dr);
-        let h = 2.0 * a * z_r / 3.0 * kappa;
+        let h = robin_h(medium);
         let order = ((28.0 / (1.0 - rho / radius)).ceil() as usize + 8).min(6000);
         let f = entry_legendre(medium.eta, order);
         let (x, xr) = (kappa * radius, kappa * rho);
@@ -178,9 +176,7 @@ impl SphereDiffusion {
         let st = medium.sigma_t_reduced();
         let eta = medium.eta;
         let kappa = medium.sigma_tr();
-        let f_dr = diffuse_fresnel_reflectance(eta);
-        let a = (1.0 + f_dr) / (1.0 - f_dr);
-        let h = 2.0 * a / (3.0 * st) * kappa;
+        let h = robin_h(medium);
         // The shallowest source: the first node at the critical angle's refraction.
         let cos_t_min = (1.0 - 1.0 / (eta * eta)).sqrt();
         let shallowest = (s_nodes[0] / st * cos_t_min).min(0.5 * radius);
@@ -193,49 +189,43 @@ impl SphereDiffusion {
         let deepest = s_nodes[n.clamp(1, 4) - 1] / st;
         let (r_lo, r_hi) = ((radius - deepest).max(0.05 * radius), radius - shallowest);
         const ROWS: usize = 160;
-        let table: Vec<Vec<f64>> = (0..=ROWS)
-            .map(|k| {
-                let r = r_lo + (r_hi - r_lo) * k as f64 / ROWS as f64;
-                log_i_ratio(kappa * r, x, order)
-            })
+        let rows: Vec<f64> = (0..=ROWS)
+            .map(|k| kappa * (r_lo + (r_hi - r_lo) * k as f64 / ROWS as f64))
             .collect();
+        let table = log_i_ratios(&rows, x, order);
         let mut c = vec![0.0; order + 1];
-        let panels = order / 4 + 8;
-        let step = std::f64::consts::FRAC_PI_2 / panels as f64;
-        for k in 0..panels {
-            for (theta_e, w) in nodes(k as f64 * step, (k + 1) as f64 * step) {
-                let (sin_e, cos_e) = theta_e.sin_cos();
-                let entering = fresnel::transmission(cos_e, eta) * cos_e * sin_e * w;
-                let sin_t = sin_e / eta;
-                let cos_t = (1.0 - sin_t * sin_t).sqrt();
-                // Meridian plane: entry y = R (sin θe, cos θe); the beam runs along
-                // cos θt (−n) + sin θt e_θ, with e_θ = (cos θe, −sin θe).
-                let dir = (
-                    -cos_t * sin_e + sin_t * cos_e,
-                    -cos_t * cos_e - sin_t * sin_e,
-                );
-                // The beam crosses the sphere in a chord 2R cos θt; a node beyond it has left.
-                let chord = 2.0 * radius * cos_t;
-                for (&sn, &sw) in s_nodes.iter().zip(s_weights.iter()) {
-                    let s = sn / st;
-                    if s >= chord {
-                        continue;
+        for (theta_e, w) in entry_nodes(order) {
+            let (sin_e, cos_e) = theta_e.sin_cos();
+            let entering = fresnel::transmission(cos_e, eta) * cos_e * sin_e * w;
+            let sin_t = sin_e / eta;
+            let cos_t = (1.0 - sin_t * sin_t).sqrt();
+            // Meridian plane: entry y = R (sin θe, cos θe); the beam runs along
+            // cos θt (−n) + sin θt e_θ, with e_θ = (cos θe, −sin θe).
+            let dir = (
+                -cos_t * sin_e + sin_t * cos_e,
+                -cos_t * cos_e - sin_t * sin_e,
+            );
+            // The beam crosses the sphere in a chord 2R cos θt; a node beyond it has left.
+            let chord = 2.0 * radius * cos_t;
+            for (&sn, &sw) in s_nodes.iter().zip(s_weights.iter()) {
+                let s = sn / st;
+                if s >= chord {
+                    continue;
+                }
+                let p = (radius * sin_e + s * dir.0, radius * cos_e + s * dir.1);
+                let r_true = (p.0 * p.0 + p.1 * p.1).sqrt();
+                let cos_big = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
+                let r = r_true.clamp(r_lo, r_hi);
+                let at = (r - r_lo) / (r_hi - r_lo) * ROWS as f64;
+                let (row, frac) = ((at.floor() as usize).min(ROWS - 1), at - at.floor());
+                let (lo_row, hi_row) = (&table[row], &table[row + 1]);
+                let weight = entering * sw;
+                for (l, p_l) in legendre(cos_big).take(order + 1).enumerate() {
+                    let q = lo_row[l] + frac.min(1.0) * (hi_row[l] - lo_row[l]);
+                    if q < -40.0 {
+                        break;
                     }
-                    let p = (radius * sin_e + s * dir.0, radius * cos_e + s * dir.1);
-                    let r_true = (p.0 * p.0 + p.1 * p.1).sqrt();
-                    let cos_big = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
-                    let r = r_true.clamp(r_lo, r_hi);
-                    let at = (r - r_lo) / (r_hi - r_lo) * ROWS as f64;
-                    let (row, frac) = ((at.floor() as usize).min(ROWS - 1), at - at.floor());
-                    let (lo_row, hi_row) = (&table[row], &table[row + 1]);
-                    let weight = entering * sw;
-                    for (l, p_l) in legendre(cos_big).take(order + 1).enumerate() {
-                        let q = lo_row[l] + frac.min(1.0) * (hi_row[l] - lo_row[l]);
-                        if q < -40.0 {
-                            break;
-                        }
-                        c[l] += weight * p_l * q.exp();
-                    }
+                    c[l] += weight * p_l * q.exp();
                 }
             }
         }
@@ -278,22 +268,31 @@ fn legendre(x: f64) -> impl Iterator<Item = f64> {
 /// oscillations crowd into 1/l² at μ = 1) on enough panels (8 nodes each) for the highest
 /// order, every order at each node by the recurrence.
 fn entry_legendre(eta: f64, order: usize) -> Vec<f64> {
-    let panels = order / 4 + 8;
-    let h = std::f64::consts::FRAC_PI_2 / panels as f64;
     let mut f = vec![0.0; order + 1];
-    for k in 0..panels {
-        for (theta, w) in nodes(k as f64 * h, (k + 1) as f64 * h) {
-            let mu = theta.cos();
-            let g = fresnel::transmission(mu, eta) * mu * theta.sin() * w;
-            for (fl, p) in f.iter_mut().zip(legendre(mu)) {
-                *fl += g * p;
-            }
+    for (theta, w) in entry_nodes(order) {
+        let mu = theta.cos();
+        let g = fresnel::transmission(mu, eta) * mu * theta.sin() * w;
+        for (fl, p) in f.iter_mut().zip(legendre(mu)) {
+            *fl += g * p;
         }
     }
     f.iter()
         .enumerate()
         .map(|(l, v)| v * (2 * l + 1) as f64 / 2.0)
         .collect()
+}
+
+/// The quadrature over the lit entry angles θ ∈ [0, π/2] for a series up to `order`:
+/// Gauss–Legendre on order/4 + 8 equal panels of 8 nodes, (θ, weight).
+fn entry_nodes(order: usize) -> impl Iterator<Item = (f64, f64)> {
+    let panels = order / 4 + 8;
+    let h = std::f64::consts::FRAC_PI_2 / panels as f64;
+    (0..panels).flat_map(move |k| nodes(k as f64 * h, (k + 1) as f64 * h))
+}
+
+/// The boundary's Robin coefficient in units of the diffusion length: h = 2ADκ, D = 1/(3σt′).
+fn robin_h(medium: &Medium) -> f64 {
+    2.0 * medium.boundary_a() / (3.0 * medium.sigma_t_reduced()) * medium.sigma_tr()
 }
 
 /// r_l = i_{l+1}(x)/i_l(x) for l ≤ `order`, by the backward recurrence
@@ -314,17 +313,28 @@ fn bessel_ratios(x: f64, order: usize) -> Vec<f64> {
 
 /// ln(i_l(x_in)/i_l(x_out)) for l ≤ `order`: ln i_0 = ln(sinh x / x), then the ratios.
 fn log_i_ratio(x_in: f64, x_out: f64, order: usize) -> Vec<f64> {
+    log_i_ratios(&[x_in], x_out, order).remove(0)
+}
+
+/// [`log_i_ratio`] for several `xs_in` against one `x_out`, whose ratios are computed once.
+fn log_i_ratios(xs_in: &[f64], x_out: f64, order: usize) -> Vec<Vec<f64>> {
     let ln_i0 = |x: f64| {
         // ln(sinh x / x) = x − ln(2x) + ln(1 − e^{−2x}), stable for every x > 0.
         x - (2.0 * x).ln() + (-(-2.0 * x).exp()).ln_1p()
     };
-    let (ri, ro) = (bessel_ratios(x_in, order), bessel_ratios(x_out, order));
-    let mut acc = ln_i0(x_in) - ln_i0(x_out);
-    (0..=order)
-        .map(|l| {
-            let v = acc;
-            acc += ri[l].ln() - ro[l].ln();
-            v
+    let ro = bessel_ratios(x_out, order);
+    xs_in
+        .iter()
+        .map(|&x_in| {
+            let ri = bessel_ratios(x_in, order);
+            let mut acc = ln_i0(x_in) - ln_i0(x_out);
+            (0..=order)
+                .map(|l| {
+                    let v = acc;
+                    acc += ri[l].ln() - ro[l].ln();
+                    v
+                })
+                .collect()
         })
         .collect()
 }
@@ -402,11 +412,7 @@ mod tests {
             (35.0, 0.5, 0.995, 1.3),
             (15.0, 3.0, 0.7, 1.6),
         ] {
-            let m = Medium {
-                sigma_a: (1.0 - albedo) * sigma_t,
-                sigma_s_reduced: albedo * sigma_t,
-                eta,
-            };
+            let m = Medium::isotropic(sigma_t, albedo, eta);
             let (cut, full) = (
                 SphereDiffusion::beam(&m, radius, 4),
                 SphereDiffusion::beam_cut(&m, radius, 4, 28.0),
@@ -433,9 +439,7 @@ mod tests {
             eta: 1.44,
         };
         let (z_r, kappa) = (1.0 / m.sigma_t_reduced(), m.sigma_tr());
-        let f_dr = diffuse_fresnel_reflectance(m.eta);
-        let a = (1.0 + f_dr) / (1.0 - f_dr);
-        let h = 2.0 * a * z_r / 3.0 * kappa;
+        let h = robin_h(&m);
         let excess = |radius: f64, theta: f64| {
             let mu = f64::cos(theta.to_radians());
             let plane =

@@ -162,7 +162,7 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
                 let Some(walk) = walk(scene, &mut rng) else {
                     continue;
                 };
-                entered += walk.weight;
+                entered += walk.entered;
                 match walk.exit {
                     None => lost += walk.lost,
                     Some((theta_bin, mu_bin, events)) => {
@@ -198,10 +198,19 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
 /// events) with the weight `left`, or None when absorbed (`lost` > 0 when ended by
 /// `MAX_EVENTS` instead).
 struct Walk {
-    weight: f64,
+    entered: f64,
     exit: Option<(usize, usize, u32)>,
     lost: f64,
     left: f64,
+}
+
+/// What the boundary does to a photon reaching it from inside: it leaves with outside cosine
+/// μ, or is reflected along d, its weight times `factor`; or the rough boundary ends it (its
+/// microfacets shadow the drawn direction).
+enum AtWall {
+    Leaves { mu: f64, factor: f64 },
+    Reflected { d: Vector3<f64>, factor: f64 },
+    Ended,
 }
 
 fn walk(scene: &TallyScene, rng: &mut ChaCha8Rng) -> Option<Walk> {
@@ -215,29 +224,14 @@ fn walk(scene: &TallyScene, rng: &mut ChaCha8Rng) -> Option<Walk> {
         eta: scene.eta,
         alpha: scene.alpha,
     };
-    let (mut weight, mut d) = if scene.alpha > 0.0 {
-        let b = boundary.sample(&Vector3::z(), &n, rng.random());
-        if !b.transmitted || b.weight <= 0.0 {
-            return None;
-        }
-        // The radiance weight carries (1/η)²; the flux's does not.
-        (b.weight * scene.eta * scene.eta, b.wi)
-    } else {
-        (
-            fresnel::transmission(cos_i, scene.eta),
-            refract_in(&n, cos_i, scene.eta),
-        )
-    };
-    if weight <= 0.0 {
-        return None;
-    }
+    let (mut weight, mut d) = enter(scene, &boundary, &n, cos_i, rng)?;
     let entered = weight;
-    let ended = |exit, lost| {
+    let ended = |exit, lost, left| {
         Some(Walk {
-            weight: entered,
+            entered,
             exit,
             lost,
-            left: 0.0,
+            left,
         })
     };
     let mut p = n * r;
@@ -251,52 +245,92 @@ fn walk(scene: &TallyScene, rng: &mut ChaCha8Rng) -> Option<Walk> {
             p += d * flight;
             events += 1;
             if rng.random::<f64>() >= scene.albedo {
-                return ended(None, 0.0);
+                return ended(None, 0.0, 0.0);
             }
             if events >= MAX_EVENTS {
-                return ended(None, weight);
+                return ended(None, weight, 0.0);
             }
             d = isotropic(rng);
             continue;
         }
         p += d * to_wall;
         let nx = p / r;
-        let theta = nx.z.clamp(-1.0, 1.0).acos().to_degrees();
-        let tb = ((theta / Tally::bin_width()) as usize).min(THETA_BINS - 1);
-        if scene.alpha > 0.0 {
-            let b = boundary.sample(&-d, &nx, rng.random());
-            if b.weight <= 0.0 {
-                return ended(None, 0.0);
+        match at_wall(scene, &boundary, &d, &nx, rng) {
+            AtWall::Ended => return ended(None, 0.0, 0.0),
+            AtWall::Reflected { d: along, factor } => {
+                weight *= factor;
+                d = along;
             }
-            if b.transmitted {
-                // The radiance weight carries η²; the flux's does not.
-                weight *= b.weight / (scene.eta * scene.eta);
-                let mb = ((b.wi.dot(&nx) * MU_BINS as f64) as usize).min(MU_BINS - 1);
-                return Some(Walk {
-                    weight: entered,
-                    exit: Some((tb, mb, events)),
-                    lost: 0.0,
-                    left: weight,
-                });
+            AtWall::Leaves { mu, factor } => {
+                let theta = nx.z.clamp(-1.0, 1.0).acos().to_degrees();
+                let tb = ((theta / Tally::bin_width()) as usize).min(THETA_BINS - 1);
+                let mb = ((mu * MU_BINS as f64) as usize).min(MU_BINS - 1);
+                return ended(Some((tb, mb, events)), 0.0, weight * factor);
             }
-            weight *= b.weight;
-            d = b.wi;
-            continue;
         }
-        let cos_in = d.dot(&nx).clamp(0.0, 1.0);
-        if rng.random::<f64>() < fresnel::reflectance(cos_in, 1.0 / scene.eta) {
-            d -= nx * (2.0 * d.dot(&nx));
-            continue;
+    }
+}
+
+/// A photon arriving along −ẑ at the surface point of normal `n` (n·ẑ = `cos_i`): its weight
+/// and direction inside, or None when it is reflected (the specular lobe).
+fn enter(
+    scene: &TallyScene,
+    boundary: &Boundary,
+    n: &Vector3<f64>,
+    cos_i: f64,
+    rng: &mut ChaCha8Rng,
+) -> Option<(f64, Vector3<f64>)> {
+    let (weight, d) = if scene.alpha > 0.0 {
+        let b = boundary.sample(&Vector3::z(), n, rng.random());
+        if !b.transmitted {
+            return None;
         }
-        let sin_out2 = scene.eta * scene.eta * (1.0 - cos_in * cos_in);
-        let mu = (1.0 - sin_out2).max(0.0).sqrt();
-        let mb = ((mu * MU_BINS as f64) as usize).min(MU_BINS - 1);
-        return Some(Walk {
-            weight: entered,
-            exit: Some((tb, mb, events)),
-            lost: 0.0,
-            left: weight,
-        });
+        // The radiance weight carries (1/η)²; the flux's does not.
+        (b.weight * scene.eta * scene.eta, b.wi)
+    } else {
+        (
+            fresnel::transmission(cos_i, scene.eta),
+            refract_in(n, cos_i, scene.eta),
+        )
+    };
+    (weight > 0.0).then_some((weight, d))
+}
+
+/// The boundary met from inside along `d` at the point of outward normal `nx`: Fresnel and
+/// Snell (smooth), or a direction drawn from the rough boundary (flux weights: Smith's G1,
+/// without the radiance BTDF's η²).
+fn at_wall(
+    scene: &TallyScene,
+    boundary: &Boundary,
+    d: &Vector3<f64>,
+    nx: &Vector3<f64>,
+    rng: &mut ChaCha8Rng,
+) -> AtWall {
+    if scene.alpha > 0.0 {
+        let b = boundary.sample(&-d, nx, rng.random());
+        return match (b.weight > 0.0, b.transmitted) {
+            (false, _) => AtWall::Ended,
+            (true, true) => AtWall::Leaves {
+                mu: b.wi.dot(nx),
+                factor: b.weight / (scene.eta * scene.eta),
+            },
+            (true, false) => AtWall::Reflected {
+                d: b.wi,
+                factor: b.weight,
+            },
+        };
+    }
+    let cos_in = d.dot(nx).clamp(0.0, 1.0);
+    if rng.random::<f64>() < fresnel::reflectance(cos_in, 1.0 / scene.eta) {
+        return AtWall::Reflected {
+            d: d - nx * (2.0 * d.dot(nx)),
+            factor: 1.0,
+        };
+    }
+    let sin_out2 = scene.eta * scene.eta * (1.0 - cos_in * cos_in);
+    AtWall::Leaves {
+        mu: (1.0 - sin_out2).max(0.0).sqrt(),
+        factor: 1.0,
     }
 }
 

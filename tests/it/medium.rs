@@ -50,14 +50,8 @@ fn truth(dir: &Path) -> Truth {
         .as_f64()
         .or(m["alpha"].as_f64())
         .unwrap();
-    let media = std::array::from_fn(|c| {
-        let a = albedo[c].as_f64().unwrap();
-        Medium {
-            sigma_a: (1.0 - a) * sigma_t,
-            sigma_s_reduced: a * sigma_t,
-            eta,
-        }
-    });
+    let media =
+        std::array::from_fn(|c| Medium::isotropic(sigma_t, albedo[c].as_f64().unwrap(), eta));
     let l = &t["light"]["direction_to_light_camera_frame"];
     Truth {
         media,
@@ -230,16 +224,6 @@ fn profiles_against_the_renders() {
     }
 }
 
-/// A medium of extinction σt and single-scattering albedo α with isotropic scattering
-/// (σs′ = σs), as the tally and the renders have it.
-fn medium_of(sigma_t: f64, albedo: f64, eta: f64) -> Medium {
-    Medium {
-        sigma_a: (1.0 - albedo) * sigma_t,
-        sigma_s_reduced: albedo * sigma_t,
-        eta,
-    }
-}
-
 /// The photon tally of one sphere behind a smooth boundary.
 fn smooth_tally(
     radius: f64,
@@ -326,7 +310,7 @@ fn the_level_correction_holds_on_unseen_media() {
         (18.0, 1.5, 0.985, 1.55),
     ] {
         let tally = smooth_tally(radius, sigma_t, albedo, eta, 1_500_000, 21);
-        let m = medium_of(sigma_t, albedo, eta);
+        let m = Medium::isotropic(sigma_t, albedo, eta);
         let e = tally.exitance(0, 60).value;
         let corrected = e / band_mean(&SphereDiffusion::corrected(&m, radius), 0, 60);
         let raw = e / band_mean(
@@ -374,7 +358,7 @@ fn diffusion_against_the_photon_tally() {
                         alpha: 0.0,
                     };
                     let t = trace(&scene, 2_000_000, 1);
-                    let m = medium_of(sigma_t, albedo, eta);
+                    let m = Medium::isotropic(sigma_t, albedo, eta);
                     for v in [Sources::Shell, Sources::Beam(4)] {
                         let model = SphereDiffusion::with_sources(&m, radius, v);
                         let cells: Vec<String> = TALLY_BANDS
@@ -689,7 +673,7 @@ fn level_against_the_photon_tally() {
         .iter()
         .map(|&(radius, sigma_t, eta, albedo)| {
             let t = smooth_tally(radius, sigma_t, albedo, eta, 1_000_000, 11);
-            let m = medium_of(sigma_t, albedo, eta);
+            let m = Medium::isotropic(sigma_t, albedo, eta);
             let model = SphereDiffusion::with_sources(&m, radius, Sources::Beam(4));
             let ratio = t.exitance(0, 60).value / band_mean(&model, 0, 60);
             (level_terms(albedo, eta, sigma_t * radius), ratio)
@@ -767,7 +751,7 @@ fn rough_boundary_against_the_photon_tally() {
             alpha,
         };
         let t = trace(&scene, 2_000_000, 1);
-        let m = medium_of(sigma_t, albedo, eta);
+        let m = Medium::isotropic(sigma_t, albedo, eta);
         let model = SphereDiffusion::corrected(&m, radius);
         let cells: Vec<String> = TALLY_BANDS
             .iter()
