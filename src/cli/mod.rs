@@ -82,6 +82,9 @@ pub(crate) struct SolveArgs {
     /// Where to write fit.json (default: beside session.json).
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
+    /// The model: the CDRF alone, or then the medium (σa, σs′, η per channel) from its light.
+    #[arg(long, value_enum, default_value_t = ModelArg::Cdrf)]
+    pub(crate) model: ModelArg,
     /// Fit without the spheres of this radius (mm), then report how well the fit predicts them.
     #[arg(long, allow_hyphen_values = true)]
     pub(crate) holdout: Option<f64>,
@@ -312,6 +315,16 @@ pub(crate) fn table_size(size: TableArg, tolerance: f64) -> workbench::render::j
         Some((a, b)) => workbench::render::job::TableSize::Fixed(a, b),
         None => workbench::render::job::TableSize::Auto(tolerance),
     }
+}
+
+/// `solve --model`.
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum ModelArg {
+    /// The CDRF alone.
+    Cdrf,
+    /// The CDRF, then σa, σs′ and η per channel by diffusion in each sphere from its light, η
+    /// and lobe (fit.json's "medium"; docs/medium.md).
+    Medium,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

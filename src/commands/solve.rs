@@ -19,6 +19,10 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<Solved> {
         MethodArg::Joint => Method::Joint,
         MethodArg::Paper => Method::Paper,
     };
+    o.model = match a.model {
+        ModelArg::Cdrf => solve::SolveModel::Cdrf,
+        ModelArg::Medium => solve::SolveModel::Medium,
+    };
     o.holdout = a.holdout;
     if let Some(p) = a.prior {
         o.fit.eta_prior = p;

@@ -3,6 +3,7 @@
 //! beside the paper's procedure ([`paper`]). The `solve` job that drives them is [`crate::solve`].
 
 pub mod joint;
+pub mod medium;
 pub mod observe;
 pub mod paper;
 pub mod predict;

@@ -206,6 +206,77 @@ pub struct HoldoutJson {
     pub unlit_rel_rmse: f64,
 }
 
+/// A value per channel (r, g, b) and its standard error.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PerChannelJson {
+    #[serde(deserialize_with = "nullable::f64x3")]
+    pub value: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
+    pub std: [f64; 3],
+}
+
+/// One value and its standard error.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ValueJson {
+    #[serde(deserialize_with = "nullable::f64")]
+    pub value: f64,
+    #[serde(deserialize_with = "nullable::f64")]
+    pub std: f64,
+}
+
+/// The medium fit: the material as a path tracer takes it (isotropic phase function, so σs′ is
+/// σs), with each quantity's stated error.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MediumJson {
+    /// The model that predicted the pixels (docs/medium.md).
+    pub profile: String,
+    /// The boundary's GGX roughness (the joint fit's lobe; 0: smooth), carried into exports.
+    #[serde(deserialize_with = "nullable::f64")]
+    pub alpha: f64,
+    pub sigma_a_per_mm: PerChannelJson,
+    pub sigma_s_reduced_per_mm: PerChannelJson,
+    pub eta: ValueJson,
+    /// The transport mean free path 1/(σa + σs′).
+    pub mean_free_path_mm: PerChannelJson,
+    /// The surface's diffuse albedo an artist sets: the classical dipole's total diffuse
+    /// reflectance of a flat surface of the medium.
+    pub diffuse_albedo: PerChannelJson,
+    /// The light's irradiance in the photos' units: given (std 0), or fitted with the medium.
+    pub irradiance: PerChannelJson,
+    pub irradiance_source: String,
+    /// What `std` is: the formal or the larger of formal and jackknife, with the model's own
+    /// error added.
+    pub std_source: String,
+    /// The residuals' RMS over the pixels' noise.
+    #[serde(deserialize_with = "nullable::f64")]
+    pub residual_over_noise: f64,
+    /// Pixel-channels fitted, and the radii they came from.
+    pub pixels: usize,
+    #[serde(deserialize_with = "nullable::vec")]
+    pub radii_mm: Vec<f64>,
+    /// The held-out radius predicted by the medium and by the joint fit's CDRF, on the same
+    /// pixels (away from the highlight and the rim).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<MediumHoldoutJson>,
+    pub converged: bool,
+    /// Profiles M(θ) computed (the fit's cost), and seconds.
+    pub profiles: usize,
+    #[serde(deserialize_with = "nullable::f64")]
+    pub seconds: f64,
+}
+
+/// A held-out radius's relative RMSE under the medium and under the CDRF.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MediumHoldoutJson {
+    #[serde(deserialize_with = "nullable::f64")]
+    pub radius_mm: f64,
+    pub pixels: usize,
+    #[serde(deserialize_with = "nullable::f64")]
+    pub medium_rel_rmse: f64,
+    #[serde(deserialize_with = "nullable::f64")]
+    pub cdrf_rel_rmse: f64,
+}
+
 /// The leave-one-radius-out estimates of a joint fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JackknifeJson {
@@ -292,6 +363,10 @@ pub struct Timings {
     #[serde(default)]
     #[serde(deserialize_with = "nullable::f64")]
     pub jackknife_s: f64,
+    /// The medium fit (`--model medium`).
+    #[serde(default)]
+    #[serde(deserialize_with = "nullable::f64")]
+    pub medium_s: f64,
     #[serde(deserialize_with = "nullable::f64")]
     pub total_s: f64,
     /// The solve stage's phases (joint method), seconds.
@@ -360,6 +435,10 @@ pub struct FitFile {
     pub rmse: RmseJson,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout: Option<HoldoutJson>,
+    /// The medium fit (`solve --model medium`): σa, σs′ and η as a path tracer takes them
+    /// (docs/formats.md, "medium").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub medium: Option<MediumJson>,
     /// The paper's per-radius fits (method "paper").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub per_radius: Option<Vec<RadiusFit>>,

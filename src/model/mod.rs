@@ -3,6 +3,7 @@
 //! lobe ([`specular`]) and their sum with its gradient ([`radiance`], whose items are re-exported
 //! here).
 
+pub mod boundary;
 pub mod cdrf;
 pub mod dipole;
 pub mod entry;

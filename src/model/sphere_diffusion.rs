@@ -25,6 +25,7 @@
 //! (docs/medium.md, "Against the photon tally"). [`SphereDiffusion::corrected`] multiplies it by
 //! [`level_correction`], a least-squares fit of its level to the tally's.
 
+use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
 use crate::model::fresnel;
 use crate::model::quadrature::nodes;
@@ -127,10 +128,26 @@ impl SphereDiffusion {
     /// The profile the medium fit uses: beam sources (four nodes), brought to the photon
     /// tally's level by [`level_correction`].
     pub fn corrected(medium: &Medium, radius: f64) -> SphereDiffusion {
+        Self::through(medium, radius, &Boundary::smooth(medium.eta))
+    }
+
+    /// [`Self::corrected`] with the light entering through `boundary` (its T(μ) instead of
+    /// Fresnel's; the beam still refracts as through a smooth surface, and the boundary's
+    /// internal reflection is the smooth one's A).
+    pub fn through(medium: &Medium, radius: f64, boundary: &Boundary) -> SphereDiffusion {
         let c = level_correction(medium, radius);
-        let mut d = Self::beam(medium, radius, 4);
+        let mut d = Self::beam_cut(medium, radius, 4, BEAM_REACH, boundary);
         d.coefficients.iter_mut().for_each(|v| *v *= c);
         d
+    }
+
+    /// M(θ) tabulated every half degree from 0 to 180°, for many pixels.
+    pub fn tabulate(&self) -> Tabulated {
+        Tabulated(
+            (0..=360)
+                .map(|k| self.m((k as f64 * 0.5).to_radians().cos()))
+                .collect(),
+        )
     }
 
     /// The coefficients with the sources placed by `sources`.
@@ -166,12 +183,18 @@ impl SphereDiffusion {
     /// coefficient (the shell's formula, per unit of its area). The entry points are integrated
     /// in θ as the shell's f_l are; the ratios come from a table over r, interpolated linearly.
     fn beam(medium: &Medium, radius: f64, n: usize) -> SphereDiffusion {
-        Self::beam_cut(medium, radius, n, BEAM_REACH)
+        Self::beam_cut(medium, radius, n, BEAM_REACH, &Boundary::smooth(medium.eta))
     }
 
     /// [`Self::beam`] with the series cut at order `reach` · R over the shallowest source's
-    /// depth.
-    fn beam_cut(medium: &Medium, radius: f64, n: usize, reach: f64) -> SphereDiffusion {
+    /// depth, the light entering through `boundary`.
+    fn beam_cut(
+        medium: &Medium,
+        radius: f64,
+        n: usize,
+        reach: f64,
+        boundary: &Boundary,
+    ) -> SphereDiffusion {
         let (s_nodes, s_weights) = LAGUERRE[n.clamp(1, 4) - 1];
         let st = medium.sigma_t_reduced();
         let eta = medium.eta;
@@ -196,7 +219,7 @@ impl SphereDiffusion {
         let mut c = vec![0.0; order + 1];
         for (theta_e, w) in entry_nodes(order) {
             let (sin_e, cos_e) = theta_e.sin_cos();
-            let entering = fresnel::transmission(cos_e, eta) * cos_e * sin_e * w;
+            let entering = boundary.transmission(cos_e) * cos_e * sin_e * w;
             let sin_t = sin_e / eta;
             let cos_t = (1.0 - sin_t * sin_t).sqrt();
             // Meridian plane: entry y = R (sin θe, cos θe); the beam runs along
@@ -217,11 +240,28 @@ impl SphereDiffusion {
                 let cos_big = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
                 let r = r_true.clamp(r_lo, r_hi);
                 let at = (r - r_lo) / (r_hi - r_lo) * ROWS as f64;
-                let (row, frac) = ((at.floor() as usize).min(ROWS - 1), at - at.floor());
-                let (lo_row, hi_row) = (&table[row], &table[row + 1]);
+                // Cubic Lagrange through four rows (linear moved M by up to 1e-5 as the rows
+                // shifted with σt′, which the fit's differences magnified to 2–4% of a column).
+                let first = (at.floor() as usize).clamp(1, ROWS - 2) - 1;
+                let t = at - first as f64;
+                let w = [
+                    -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0,
+                    t * (t - 2.0) * (t - 3.0) / 2.0,
+                    -t * (t - 1.0) * (t - 3.0) / 2.0,
+                    t * (t - 1.0) * (t - 2.0) / 6.0,
+                ];
+                let rows = [
+                    &table[first],
+                    &table[first + 1],
+                    &table[first + 2],
+                    &table[first + 3],
+                ];
                 let weight = entering * sw;
                 for (l, p_l) in legendre(cos_big).take(order + 1).enumerate() {
-                    let q = lo_row[l] + frac.min(1.0) * (hi_row[l] - lo_row[l]);
+                    let q = w[0] * rows[0][l]
+                        + w[1] * rows[1][l]
+                        + w[2] * rows[2][l]
+                        + w[3] * rows[3][l];
                     if q < -40.0 {
                         break;
                     }
@@ -248,6 +288,19 @@ impl SphereDiffusion {
             .zip(legendre(cos_theta.clamp(-1.0, 1.0)))
             .map(|(c, p)| c * p)
             .sum()
+    }
+}
+
+/// M(θ) every half degree, interpolated linearly in θ ([`SphereDiffusion::tabulate`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tabulated(Vec<f64>);
+
+impl Tabulated {
+    /// M at cos θ.
+    pub fn at(&self, cos_theta: f64) -> f64 {
+        let k = cos_theta.clamp(-1.0, 1.0).acos().to_degrees() * 2.0;
+        let (i, f) = ((k.floor() as usize).min(359), k - k.floor());
+        self.0[i] * (1.0 - f) + self.0[i + 1] * f
     }
 }
 
@@ -415,7 +468,7 @@ mod tests {
             let m = Medium::isotropic(sigma_t, albedo, eta);
             let (cut, full) = (
                 SphereDiffusion::beam(&m, radius, 4),
-                SphereDiffusion::beam_cut(&m, radius, 4, 28.0),
+                SphereDiffusion::beam_cut(&m, radius, 4, 28.0, &Boundary::smooth(eta)),
             );
             for deg in (0..=90).step_by(5) {
                 let c = f64::from(deg).to_radians().cos();

@@ -138,6 +138,7 @@ pub(super) fn fit_file(
             spheres,
         },
         holdout,
+        medium: None,
         per_radius: outcome.per_radius,
         baseline: outcome.baseline,
         model_choice: outcome.model_choice,

@@ -176,9 +176,10 @@ pub(super) fn load_inspected(
 pub fn fingerprint(opts: &Options) -> String {
     let f = &opts.fit;
     format!(
-        "workbench {} | method {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | cdrf {} | baseline {}",
+        "workbench {} | method {:?} | model {:?} | holdout {:?} | eta prior {:?} | irradiance {:?} | reduction {:?} | robust {} | extensions {:?} | start sigma0 {:?} | start light {:?} | light {} | jackknife {} | entry {} | cdrf {} | baseline {}",
         env!("CARGO_PKG_VERSION"),
         opts.method,
+        opts.model,
         opts.holdout,
         f.eta_prior,
         f.irradiance,

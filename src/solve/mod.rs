@@ -19,6 +19,7 @@ use std::time::Instant;
 
 mod file;
 mod load;
+mod medium;
 mod options;
 mod outcome;
 mod replot;
@@ -27,6 +28,7 @@ mod summary;
 use file::{fit_file, predictions};
 use load::{cached, load_inspected};
 pub use load::{fingerprint, load, Loaded};
+pub use medium::{SolveModel, PROFILE};
 pub use options::Options;
 use outcome::{paper_outcome, Outcome};
 pub use replot::replot;
@@ -72,6 +74,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         .clone()
         .unwrap_or_else(|| l.report.session_file.with_file_name("fit.json"));
     check_holdout(opts, &l)?;
+    medium::check(opts)?;
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
     let mut notes: Vec<String> = unfitted_floor_note(opts, &l)
         .into_iter()
@@ -116,7 +119,12 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let (spheres, holdout) = predictions(opts, &l, &outcome);
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     pb.inc(1);
-    let fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
+    let medium = (opts.model == SolveModel::Medium)
+        .then(|| medium::run(opts, &l, &outcome, is_held, &mut notes))
+        .flatten();
+    l.timings.medium_s = medium.as_ref().map_or(0.0, |m| m.seconds);
+    let mut fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
+    fit.medium = medium;
     // One set: the figures, then fit.json (what the reuse check trusts) last.
     let mut roots: Vec<&Path> = vec![&out];
     roots.extend(opts.plots.as_deref());

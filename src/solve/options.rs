@@ -1,6 +1,7 @@
 //! What a solve is asked: the job's own options (where, which method, what to reuse, which
 //! figures) and the fit's settings ([`Settings`], the one settings type of a fit).
 
+use super::medium::SolveModel;
 use crate::fit::joint::Settings;
 use crate::formats::fit::Method;
 use std::path::PathBuf;
@@ -19,6 +20,8 @@ pub struct Options {
     /// drawn).
     pub plots: Option<PathBuf>,
     pub quiet: bool,
+    /// The CDRF alone, or the medium after it (`--model`).
+    pub model: SolveModel,
     /// The fit's settings.
     pub fit: Settings,
 }
@@ -33,6 +36,7 @@ impl Options {
             redetect: false,
             plots: None,
             quiet: true,
+            model: SolveModel::Cdrf,
             fit: Settings::default(),
         }
     }

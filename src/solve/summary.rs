@@ -9,6 +9,7 @@ use std::fmt::Write;
 pub fn summary(f: &FitFile) -> String {
     [
         material(f),
+        medium(f),
         light(f),
         extensions(f),
         quality(f),
@@ -46,6 +47,41 @@ fn rgb(v: &[f64; 3], e: &[f64; 3], digits: usize) -> String {
         .map(|c| pm(v[c], e[c], digits))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// The medium fit's σa, σs′, η, mean free path and surface albedo, and how well it fits.
+fn medium(f: &FitFile) -> String {
+    let Some(m) = &f.medium else {
+        return String::new();
+    };
+    let mut s = String::new();
+    let row = |s: &mut String, name: &str, p: &PerChannelJson, unit: &str| {
+        let _ = writeln!(s, "{name:<8} {}{unit}", rgb(&p.value, &p.std, 4));
+    };
+    row(&mut s, "sigma_a", &m.sigma_a_per_mm, " /mm (medium)");
+    row(&mut s, "sigma_s'", &m.sigma_s_reduced_per_mm, " /mm");
+    let _ = writeln!(
+        s,
+        "eta      {} (medium), mean free path {} mm",
+        pm(m.eta.value, m.eta.std, 4),
+        rgb(&m.mean_free_path_mm.value, &m.mean_free_path_mm.std, 3)
+    );
+    let _ = writeln!(
+        s,
+        "surface  albedo {}; residuals {:.2}× the noise over {} pixel-channels, {} profiles, {:.1} s{}",
+        rgb(&m.diffuse_albedo.value, &m.diffuse_albedo.std, 3),
+        m.residual_over_noise,
+        m.pixels,
+        m.profiles,
+        m.seconds,
+        m.holdout.map_or(String::new(), |h| format!(
+            "; held-out {} mm: medium {:.2}%, CDRF {:.2}%",
+            h.radius_mm,
+            100.0 * h.medium_rel_rmse,
+            100.0 * h.cdrf_rel_rmse
+        ))
+    );
+    s
 }
 
 /// The method, σ0, the albedo, η and the lobe.

@@ -1,0 +1,197 @@
+//! `solve --model medium`: after the joint fit, the medium fit ([`crate::fit::medium`]) from its
+//! light, η and lobe, with the held-out radius predicted by both models on the same pixels, as
+//! fit.json's `"medium"` and its notes.
+
+use super::load::Loaded;
+use super::outcome::Outcome;
+use super::Options;
+use crate::error::{Error, Result};
+use crate::fit::medium::{self, MediumFit, Radius, Setup, MODEL_ERROR};
+use crate::fit::observe::SphereData;
+use crate::formats::fit::{MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson};
+use crate::model::idx;
+
+/// Which model `solve` fits the photos with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SolveModel {
+    /// The CDRF alone (the source paper's model, extended).
+    #[default]
+    Cdrf,
+    /// The CDRF, then the medium from its light, η and lobe.
+    Medium,
+}
+
+/// The profile's name in fit.json.
+pub const PROFILE: &str =
+    "diffusion in the sphere, beam sources, level corrected to the photon tally; GGX boundary (docs/medium.md)";
+
+/// The notes' threshold: residuals above this many times the noise are said.
+const MISFIT: f64 = 2.0;
+
+/// `--model medium` needs the joint fit's light and η.
+pub(super) fn check(opts: &Options) -> Result<()> {
+    if opts.model == SolveModel::Medium && opts.method != Method::Joint {
+        return Err(Error::Argument(
+            "--model medium starts from the joint fit's light, η and lobe: use it with --method joint".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The medium fit after the joint fit `outcome`, on the spheres `is_held` does not hold out.
+pub(super) fn run(
+    opts: &Options,
+    l: &Loaded,
+    outcome: &Outcome,
+    is_held: impl Fn(&SphereData) -> bool,
+    notes: &mut Vec<String>,
+) -> Option<MediumJson> {
+    let p = &outcome.params;
+    let m = &p.material;
+    let eta_std = outcome.std[idx::ETA];
+    let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
+    let setup = Setup {
+        light: p.light.direction(),
+        eta_prior: (
+            m.eta,
+            if eta_std.is_finite() && eta_std > 0.0 {
+                eta_std
+            } else {
+                opts.fit.eta_prior.1
+            },
+        ),
+        alpha: if outcome.specular {
+            m.specular.alpha
+        } else {
+            0.0
+        },
+        irradiance: opts.fit.irradiance,
+        largest_radius: fitted.iter().map(|s| s.radius_mm).fold(1.0, f64::max),
+    };
+    let radii = medium::pixels(&fitted, &setup.light);
+    if radii.is_empty() {
+        notes.push("medium: not fitted — no sphere has pixels in every channel away from the highlight and the rim".into());
+        return None;
+    }
+    let start = medium::start(&radii, &setup, m.sigma0_mm);
+    let f = medium::fit(&radii, &setup, &start);
+    let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
+    let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
+    say(&f, notes);
+    Some(json(&f, holdout))
+}
+
+/// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.
+fn holdout(
+    f: &MediumFit,
+    setup: &Setup,
+    outcome: &Outcome,
+    held: &[&SphereData],
+) -> MediumHoldoutJson {
+    let radii: Vec<Radius> = medium::pixels(held, &setup.light);
+    let (mut d_medium, mut d_cdrf, mut o2, mut n) = (0.0, 0.0, 0.0, 0);
+    for r in &radii {
+        let predicted = medium::predict(f, setup, r);
+        for c in 0..3 {
+            for (px, pm) in r.pixels[c].iter().zip(&predicted[c]) {
+                d_medium += (pm - px.radiance).powi(2);
+                o2 += px.radiance.powi(2);
+                n += 1;
+            }
+        }
+    }
+    // The CDRF on the same pixels: each held sphere's observations that the medium fits.
+    for s in held {
+        for o in &s.obs {
+            if !medium::fitted(&o.geometry.normal, &o.geometry.view, &setup.light) {
+                continue;
+            }
+            let pred = outcome.model.radiance(&outcome.params, &o.geometry);
+            for c in 0..3 {
+                if o.weight[c] > 0.0 {
+                    d_cdrf += (pred[c] - o.radiance[c]).powi(2);
+                }
+            }
+        }
+    }
+    MediumHoldoutJson {
+        radius_mm: radii.first().map_or(f64::NAN, |r| r.radius_mm),
+        pixels: n,
+        medium_rel_rmse: (d_medium / o2).sqrt(),
+        cdrf_rel_rmse: (d_cdrf / o2).sqrt(),
+    }
+}
+
+/// The notes a medium fit needs: an unknown level, a misfit, no convergence.
+fn say(f: &MediumFit, notes: &mut Vec<String>) {
+    if !f.irradiance_given {
+        notes.push(
+            "medium: no --irradiance, so the light's level was fitted with the medium: σa and σs′ rest on the profile's shape across the radii and are poorly determined (their errors say how poorly); give the irradiance (pixel value / exposure of a surface facing the light) to measure them".into(),
+        );
+    }
+    if f.residual_over_noise > MISFIT {
+        notes.push(format!(
+            "medium: residuals {:.1}× the noise: the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (docs/medium.md names what the model leaves out)",
+            f.residual_over_noise
+        ));
+    }
+    if !f.at_bounds.is_empty() {
+        notes.push(format!(
+            "medium: {} ended at the edge of the range the fit explores (docs/medium.md): the photos pull it beyond what the model can say, so its value and error are not a measurement",
+            f.at_bounds.join(", ")
+        ));
+    }
+    if !f.converged {
+        notes.push("medium: the fit did not converge; its values are where it stopped".into());
+    }
+    if f.radii.len() < 3 {
+        notes.push(format!(
+            "medium: {} radius(es), too few for the jackknife: the errors are formal only",
+            f.radii.len()
+        ));
+    }
+}
+
+fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>) -> MediumJson {
+    let d = f.derived();
+    let per = |p: medium::PerChannel| PerChannelJson {
+        value: p.value,
+        std: p.std,
+    };
+    MediumJson {
+        profile: PROFILE.into(),
+        alpha: f.alpha,
+        sigma_a_per_mm: per(d.sigma_a),
+        sigma_s_reduced_per_mm: per(d.sigma_s_reduced),
+        eta: ValueJson {
+            value: d.eta.0,
+            std: d.eta.1,
+        },
+        mean_free_path_mm: per(d.mean_free_path),
+        diffuse_albedo: per(d.diffuse_albedo),
+        irradiance: per(d.irradiance),
+        irradiance_source: if f.irradiance_given {
+            "given (--irradiance)".into()
+        } else {
+            "fitted with the medium (no --irradiance)".into()
+        },
+        std_source: format!(
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, η {}) in quadrature",
+            if f.std_jackknife.is_some() {
+                "larger of formal and jackknife"
+            } else {
+                "formal"
+            },
+            100.0 * MODEL_ERROR.sigma_a,
+            100.0 * MODEL_ERROR.sigma_s_reduced,
+            MODEL_ERROR.eta
+        ),
+        residual_over_noise: f.residual_over_noise,
+        pixels: f.pixels,
+        radii_mm: f.radii.clone(),
+        holdout,
+        converged: f.converged,
+        profiles: f.profiles,
+        seconds: f.seconds,
+    }
+}
