@@ -2,7 +2,7 @@
 # Install the system packages workbench needs (Debian 12), skipping what is present.
 # Idempotent. As root it installs; otherwise it prints the exact apt-get line and fails.
 set -euo pipefail
-packages=(libopencv-dev clang libclang-dev pkg-config glslang-tools chromium)
+packages=(libopencv-dev clang libclang-dev pkg-config glslang-tools chromium python3)
 missing=()
 for p in "${packages[@]}"; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then

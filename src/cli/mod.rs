@@ -50,6 +50,8 @@ pub(crate) enum Command {
     Render(RenderArgs),
     /// A static page that shows a fit's material in the browser (WebGL2): a sphere row and a mesh.
     View(ViewArgs),
+    /// Write a fit's measured medium (`solve --model medium`) for Mitsuba, pbrt, Blender or Unreal.
+    Export(ExportArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -220,6 +222,27 @@ pub(crate) enum TextureArg {
     Exr,
     Png16,
     Png8Srgb,
+}
+
+#[derive(Args)]
+pub(crate) struct ExportArgs {
+    /// fit.json with a "medium" (written by `solve --model medium`).
+    pub(crate) fit: PathBuf,
+    /// The renderers, comma-separated: mitsuba, pbrt, blender, unreal.
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub(crate) to: Vec<ExportTarget>,
+    /// The folder the files go into (default: `export/` beside fit.json).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+}
+
+/// `export --to`.
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum ExportTarget {
+    Mitsuba,
+    Pbrt,
+    Blender,
+    Unreal,
 }
 
 #[derive(Args)]

@@ -6,6 +6,7 @@ mod bench;
 mod calibrate;
 mod check;
 mod detect;
+mod export;
 mod lut;
 mod plot;
 mod render;
@@ -43,6 +44,7 @@ pub(crate) fn run(command: Command, quiet: bool) -> Result<Box<dyn Report>> {
         Command::Lut(a) => lut::lut(a),
         Command::Render(a) => boxed(render::render(a)),
         Command::View(a) => boxed(view::view(a)),
+        Command::Export(a) => boxed(export::export(a)),
         Command::Check { session } => boxed(check::check(session)),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => boxed(calibrate::calibrate(a, quiet)),

@@ -11,6 +11,7 @@ pub mod fit;
 pub mod glb;
 pub mod input;
 pub mod intrinsics;
+pub mod material_export;
 pub mod output;
 pub mod photo;
 pub mod session;
