@@ -70,14 +70,16 @@ pub(super) fn of(problem: &Problem) -> Errors {
     let pixels_ss: f64 = r.rows(0, m).iter().map(|v| v * v).sum();
     let residual_over_noise = (pixels_ss / m as f64).sqrt();
     let s2 = (pixels_ss / (m as f64 - n as f64).max(1.0)).max(1.0);
-    let formal = (jac.transpose() * &jac)
-        .try_inverse()
-        .map(|c| c * s2)
-        .unwrap_or_else(|| DMatrix::from_element(n, n, f64::NAN));
+    let formal = inverse_of_the_determined(&(jac.transpose() * &jac)) * s2;
     let std_formal: Vec<f64> = (0..n).map(|k| sqrt(formal[(k, k)])).collect();
     let std_jackknife = jackknife(problem, &r, &jac);
     let stated: Vec<f64> = match &std_jackknife {
-        Some(j) => std_formal.iter().zip(j).map(|(f, j)| f.max(*j)).collect(),
+        // A parameter the data do not move stays not determined.
+        Some(j) => std_formal
+            .iter()
+            .zip(j)
+            .map(|(f, j)| if f.is_nan() { f64::NAN } else { f.max(*j) })
+            .collect(),
         None => std_formal.clone(),
     };
     // The formal correlations, scaled to the statistical errors, and the model's own error.
@@ -97,6 +99,24 @@ pub(super) fn of(problem: &Problem) -> Errors {
         residual_over_noise,
         profiles,
     }
+}
+
+/// (JᵀJ)⁻¹ over the parameters the data move (a column of zeros, a parameter held at its range's
+/// edge, gets NaN and leaves the others their errors); all NaN if the rest is singular.
+fn inverse_of_the_determined(jtj: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = jtj.nrows();
+    let largest = (0..n).map(|k| jtj[(k, k)]).fold(0.0f64, f64::max);
+    let moved: Vec<usize> = (0..n).filter(|&k| jtj[(k, k)] > 1e-20 * largest).collect();
+    let sub = DMatrix::from_fn(moved.len(), moved.len(), |a, b| jtj[(moved[a], moved[b])]);
+    let mut out = DMatrix::from_element(n, n, f64::NAN);
+    if let Some(inv) = sub.try_inverse() {
+        for (a, &i) in moved.iter().enumerate() {
+            for (b, &j) in moved.iter().enumerate() {
+                out[(i, j)] = inv[(a, b)];
+            }
+        }
+    }
+    out
 }
 
 /// Leave each radius out by one Gauss–Newton step from the fit; the estimates' spread, widened
@@ -119,10 +139,15 @@ fn jackknife(problem: &Problem, r: &DVector<f64>, jac: &DMatrix<f64>) -> Option<
             let keep: Vec<usize> = (0..rows).filter(|&i| i < lo || i >= hi).collect();
             let j = DMatrix::from_fn(keep.len(), n, |i, c| jac[(keep[i], c)]);
             let rr = DVector::from_fn(keep.len(), |i, _| r[keep[i]]);
-            let step = (j.transpose() * &j)
-                .try_inverse()
-                .map(|inv| -(inv * (j.transpose() * rr)))
-                .unwrap_or_else(|| DVector::from_element(n, f64::NAN));
+            // The parameters the data do not move take no step.
+            let inv = inverse_of_the_determined(&(j.transpose() * &j)).map(|v| {
+                if v.is_nan() {
+                    0.0
+                } else {
+                    v
+                }
+            });
+            let step = -(inv * (j.transpose() * rr));
             &problem.u + step
         })
         .collect();
@@ -162,7 +187,16 @@ pub struct Derived {
 impl MediumFit {
     /// The quantities a renderer takes, each std from the covariance by its gradient in u.
     pub fn derived(&self) -> Derived {
-        let var = |g: &DVector<f64>| (g.transpose() * &self.covariance * g)[(0, 0)];
+        // gᵀCg over the parameters g reaches (a not-determined one elsewhere stays out).
+        let var = |g: &DVector<f64>| {
+            let mut v = 0.0;
+            for i in (0..g.len()).filter(|&i| g[i] != 0.0) {
+                for j in (0..g.len()).filter(|&j| g[j] != 0.0) {
+                    v += g[i] * self.covariance[(i, j)] * g[j];
+                }
+            }
+            v
+        };
         let sqrt = |v: f64| {
             if v.is_nan() {
                 f64::NAN
