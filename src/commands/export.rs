@@ -27,7 +27,7 @@ pub(crate) fn export(a: ExportArgs) -> Result<Exported> {
         .chain(&m.sigma_s_reduced_per_mm.value)
         .chain(&m.mean_free_path_mm.value)
         .all(|v| v.is_finite() && *v > 0.0);
-    if !positive || !(m.eta.value.is_finite() && m.eta.value > 1.0) || !m.alpha.is_finite() {
+    if !(positive && m.eta.value.is_finite() && m.eta.value > 1.0 && m.alpha.is_finite()) {
         bail!(
             "{}: the medium's σa, σs′ and mean free path must be positive and η above 1; this fit's are not (a failed medium fit)",
             a.fit.display()

@@ -92,8 +92,8 @@ fn holdout(
     let (mut d_medium, mut d_cdrf, mut o2, mut n) = (0.0, 0.0, 0.0, 0);
     for r in &radii {
         let predicted = medium::predict(f, setup, r);
-        for c in 0..3 {
-            for (px, pm) in r.pixels[c].iter().zip(&predicted[c]) {
+        for (pixels, predicted) in r.pixels.iter().zip(&predicted) {
+            for (px, pm) in pixels.iter().zip(predicted) {
                 d_medium += (pm - px.radiance).powi(2);
                 o2 += px.radiance.powi(2);
                 n += 1;
@@ -107,9 +107,9 @@ fn holdout(
                 continue;
             }
             let pred = outcome.model.radiance(&outcome.params, &o.geometry);
-            for c in 0..3 {
-                if o.weight[c] > 0.0 {
-                    d_cdrf += (pred[c] - o.radiance[c]).powi(2);
+            for ((p, l), w) in pred.iter().zip(&o.radiance).zip(&o.weight) {
+                if *w > 0.0 {
+                    d_cdrf += (p - l).powi(2);
                 }
             }
         }

@@ -810,9 +810,9 @@ fn the_rough_boundary_transmits_as_the_sampled_one() {
         let sampled = dielectric::Boundary { eta, alpha };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut worst: f64 = 0.0;
-        for mu in [0.1, 0.3, 0.6, 0.95] {
+        for mu in [0.1f64, 0.3, 0.6, 0.95] {
             // Light arrives along −ẑ; the surface normal makes cos μ with ẑ.
-            let n = Vector3::new((1.0 - mu * mu as f64).sqrt(), 0.0, mu);
+            let n = Vector3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
             let k = 400_000;
             let sum: f64 = (0..k)
                 .map(|_| {
@@ -1031,9 +1031,10 @@ for node in ast.walk(tree):
             .collect()
     };
     let mfp = m.mean_free_path_mm.value;
-    for c in 0..3 {
-        assert!(close(input("Subsurface_Radius")[c], mfp[c]));
-        assert!(close(input("Base_Color")[c], m.diffuse_albedo.value[c]));
+    let (radius, colour) = (input("Subsurface_Radius"), input("Base_Color"));
+    for (c, v) in mfp.iter().enumerate() {
+        assert!(close(radius[c], *v));
+        assert!(close(colour[c], m.diffuse_albedo.value[c]));
     }
     assert!(close(input("IOR")[0], m.eta.value));
     assert!((input("Roughness")[0].powi(2) - m.alpha).abs() < 1e-12);
