@@ -31,6 +31,14 @@ use std::f64::consts::PI;
 /// 1 + K (μ̄ − μ), μ̄ the exit-weighted mean cosine, which keeps its integral.
 pub const EXIT_TILT: f64 = 0.11;
 
+/// The rough boundary's loss of level: GGX microfacets with Smith masking (the renderers'
+/// rough dielectric) do not conserve energy, and light that meets the wall many times inside
+/// (high albedo) loses more. The photon tally over the model entering through T_α, θ 0–60°, is
+/// 1 − α^{3/2} (c₀ + c₁ s + c₂ (η − 1.45)) with s = √(1 − α′), least squares over 108 spheres
+/// (α 0.05–0.25, albedo 0.9–0.995, η 1.35–1.62, σt R 7.5–70; `medium::rough_level_against_the_photon_tally`,
+/// which prints them): from up to 23% off to within 2.9% (rms 1.0%).
+pub const ROUGH_LEVEL: [f64; 3] = [1.89027, -3.97601, 0.64846];
+
 /// Below this roughness the boundary is taken as smooth.
 const SMOOTH_ALPHA: f64 = 1e-3;
 
@@ -104,6 +112,19 @@ impl Boundary {
     /// c = ∫₀¹ T(μ) 2μ dμ: the fraction of diffuse light from outside that enters.
     pub fn hemispherical(&self) -> f64 {
         self.hemispherical
+    }
+
+    /// The factor the rough boundary's losses put on the exitance of a medium of reduced albedo
+    /// `reduced_albedo` ([`ROUGH_LEVEL`]; 1 when smooth). Outside the range it was fitted on it
+    /// is held at the range's edge.
+    pub fn level(&self, reduced_albedo: f64) -> f64 {
+        if self.is_smooth() {
+            return 1.0;
+        }
+        let s = (1.0 - reduced_albedo).max(0.0).sqrt().clamp(0.07, 0.32);
+        let c = ROUGH_LEVEL;
+        1.0 - self.alpha.min(0.25).powf(1.5)
+            * (c[0] + c[1] * s + c[2] * (self.eta.clamp(1.35, 1.62) - 1.45))
     }
 
     /// The radiance leaving at cos μ per unit exitance, T(μ)/(π c) · (1 + K (μ̄ − μ)) (1/sr,

@@ -133,9 +133,10 @@ impl SphereDiffusion {
 
     /// [`Self::corrected`] with the light entering through `boundary` (its T(μ) instead of
     /// Fresnel's; the beam still refracts as through a smooth surface, and the boundary's
-    /// internal reflection is the smooth one's A).
+    /// internal reflection is the smooth one's A), and the rough boundary's loss of level
+    /// ([`Boundary::level`]).
     pub fn through(medium: &Medium, radius: f64, boundary: &Boundary) -> SphereDiffusion {
-        let c = level_correction(medium, radius);
+        let c = level_correction(medium, radius) * boundary.level(medium.reduced_albedo());
         let mut d = Self::beam_cut(medium, radius, 4, BEAM_REACH, boundary);
         d.coefficients.iter_mut().for_each(|v| *v *= c);
         d

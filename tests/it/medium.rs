@@ -836,10 +836,11 @@ fn the_rough_boundary_transmits_as_the_sampled_one() {
     }
 }
 
-/// The rough boundary's entry in the model against the photon tally with the renders' GGX
-/// boundary (wax-like, α 0.15, 35 mm): near the terminator the smooth model misses a third of the
-/// light (measured 1.34 at 80–90°), the rough one 3% (1.026); on the lit side both are 4–5% bright
-/// (0.958). Asserted: 80–90° within 0.92–1.08 and the smooth > 1.2; 0–60° within 0.92–1.02.
+/// The rough boundary in the model against the photon tally with the renders' GGX boundary
+/// (wax-like, α 0.15, 35 mm): near the terminator Fresnel's entry misses a third of the light
+/// (the tally over the model measured 1.34 at 80–90°), T_α's entry 5% (1.05 with the rough
+/// level); on the lit side the rough boundary's loss of level brings the model from 4% bright
+/// to 0.999. Asserted: 80–90° within 0.92–1.08 and Fresnel's > 1.2; 0–60° within 0.98–1.02.
 #[test]
 fn the_rough_entry_follows_the_photon_tally() {
     use workbench::synth::photon_tally::{trace, TallyScene};
@@ -863,7 +864,7 @@ fn the_rough_entry_follows_the_photon_tally() {
     let (lit, terminator) = (ratio(&rough, 0, 60), ratio(&rough, 80, 90));
     let smooth_terminator = ratio(&smooth, 80, 90);
     println!("rough: 0–60° {lit:.3}, 80–90° {terminator:.3}; smooth 80–90° {smooth_terminator:.3}");
-    assert!((0.92..1.02).contains(&lit), "{lit}");
+    assert!((0.98..1.02).contains(&lit), "{lit}");
     assert!((0.92..1.08).contains(&terminator), "{terminator}");
     assert!(smooth_terminator > 1.2, "{smooth_terminator}");
 }
@@ -897,9 +898,9 @@ fn medium_solve(
 }
 
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
-/// out: measured (2026-12-04) η 1.4087 against 1.4; σa +10.4, +8.1, +6.2%; σs′ +7.1, +6.7,
-/// +6.6%; residuals 0.92× the noise; the held-out sphere 4.22% by the medium, 7.60% by the CDRF
-/// on the same pixels. Asserted: η within 0.02, σa within 15%, σs′ within 10%, residuals below
+/// out: measured (2026-12-04) η 1.4018 against 1.4; σa +5.6, +4.9, +4.7%; σs′ +8.8, +7.9,
+/// +7.4%; residuals 0.92× the noise; the held-out sphere 4.21% by the medium, 7.60% by the CDRF
+/// on the same pixels. Asserted: η within 0.01, σa within 10%, σs′ within 14%, residuals below
 /// 1.1× the noise, and the medium's held-out error below the CDRF's. (Coverage is not asserted
 /// here: the stated errors' model term was set from this session and wax.)
 #[test]
@@ -907,7 +908,7 @@ fn the_medium_of_the_soap_renders() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
     let (dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
-    assert!((m.eta.value - 1.4).abs() < 0.02, "η {}", m.eta.value);
+    assert!((m.eta.value - 1.4).abs() < 0.01, "η {}", m.eta.value);
     for c in 0..3 {
         let (a, s) = (&m.sigma_a_per_mm, &m.sigma_s_reduced_per_mm);
         let ea = a.value[c] / t.media[c].sigma_a - 1.0;
@@ -917,7 +918,7 @@ fn the_medium_of_the_soap_renders() {
             100.0 * ea,
             100.0 * es
         );
-        assert!(ea.abs() < 0.15 && es.abs() < 0.10, "channel {c}: {ea} {es}");
+        assert!(ea.abs() < 0.10 && es.abs() < 0.14, "channel {c}: {ea} {es}");
     }
     assert!(m.residual_over_noise < 1.1, "{}", m.residual_over_noise);
     let h = m.holdout.expect("the held-out radius");
@@ -1178,4 +1179,67 @@ fn the_medium_is_refused_with_the_papers_method() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("--method joint"), "{err}");
     assert!(!dir.path().join("fit.json").exists());
+}
+
+/// The rough boundary's level, run by hand (about 1 min): the photon tally with the renders' GGX
+/// boundary over the model entering through it without its loss, θ 0–60°, over roughness,
+/// index, albedo and size; the least-squares fit of 1 − α^{3/2} (c₀ + c₁ s + c₂ (η − 1.45)),
+/// s = √(1 − α′), which `model::boundary::ROUGH_LEVEL` holds. Measured (2026-12-04): up to
+/// 0.229 off uncorrected, 0.029 with the fit (rms 0.010).
+#[test]
+#[ignore = "by hand: cargo test --release --test it -- --ignored medium::rough_level_against_the_photon_tally --nocapture"]
+fn rough_level_against_the_photon_tally() {
+    use nalgebra::{DMatrix, DVector};
+    use workbench::synth::photon_tally::{trace, TallyScene};
+    let mut rows = vec![];
+    for (radius, sigma_t) in [(15.0, 0.5), (25.0, 1.0), (35.0, 2.0)] {
+        for eta in [1.35, 1.5, 1.62] {
+            for albedo in [0.9, 0.97, 0.995] {
+                for alpha in [0.05, 0.1, 0.15, 0.25] {
+                    let t = trace(
+                        &TallyScene {
+                            radius,
+                            sigma_t,
+                            albedo,
+                            eta,
+                            alpha,
+                        },
+                        400_000,
+                        17,
+                    );
+                    let m = Medium::isotropic(sigma_t, albedo, eta);
+                    let b = Boundary::rough(eta, alpha);
+                    let model = SphereDiffusion::through(&m, radius, &b);
+                    // The model without its loss of level.
+                    let ratio = t.exitance(0, 60).value / band_mean(&model, 0, 60)
+                        * b.level(m.reduced_albedo());
+                    let s = (1.0 - m.reduced_albedo()).sqrt();
+                    let a = alpha.powf(1.5);
+                    rows.push(([a, a * s, a * (eta - 1.45)], ratio));
+                }
+            }
+        }
+    }
+    let x = DMatrix::from_fn(rows.len(), 3, |i, j| rows[i].0[j]);
+    let y = DVector::from_fn(rows.len(), |i, _| 1.0 - rows[i].1);
+    let c = x.svd(true, true).solve(&y, 1e-12).unwrap();
+    let worst = |c: &[f64]| {
+        rows.iter()
+            .map(|(t, r)| {
+                (r / (1.0 - t.iter().zip(c).map(|(t, c)| t * c).sum::<f64>()) - 1.0).abs()
+            })
+            .fold(0.0, f64::max)
+    };
+    let raw = rows
+        .iter()
+        .map(|(_, r)| (r - 1.0).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "ROUGH_LEVEL = {:?}: uncorrected at most {raw:.4}, fitted {:.4}, committed {:.4}",
+        c.iter()
+            .map(|v| (v * 1e5).round() / 1e5)
+            .collect::<Vec<_>>(),
+        worst(c.as_slice()),
+        worst(&workbench::model::boundary::ROUGH_LEVEL)
+    );
 }
