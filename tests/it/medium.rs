@@ -935,15 +935,7 @@ fn the_medium_of_the_soap_renders() {
 /// (σt = σa + σs′, albedo σs′/σt, roughness √α, the mean free path per channel), to 1e-12.
 fn exports_read_back(fit: &Path, m: &workbench::formats::fit::MediumJson) {
     let out = fit.with_file_name("export");
-    let (code, _, err) = common::wb(&[
-        "--quiet",
-        "export",
-        fit.to_str().unwrap(),
-        "--to",
-        "mitsuba,pbrt,blender,unreal",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, err) = export(fit, "mitsuba,pbrt,blender,unreal", &out);
     assert_eq!(code, 0, "{err}");
     let (a, s) = (m.sigma_a_per_mm.value, m.sigma_s_reduced_per_mm.value);
     let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * y.abs().max(1.0);
@@ -1056,6 +1048,20 @@ for node in ast.walk(tree):
     assert!(close(u["Specular"].as_f64().unwrap() * 0.08, f0));
 }
 
+/// `workbench export <fit> --to <to> --out <out>`: its exit code and standard error.
+fn export(fit: &Path, to: &str, out: &Path) -> (i32, String) {
+    let (code, _, err) = common::wb(&[
+        "--quiet",
+        "export",
+        fit.to_str().unwrap(),
+        "--to",
+        to,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    (code, err)
+}
+
 /// pbrt-v4 scene text by its grammar: `#` comments, directives (capitalised words), quoted
 /// strings, and parameters as a quoted "type name" followed by one value or a bracketed list;
 /// each "type name" with its values (strings keep their quotes). A list's length must fit its
@@ -1147,15 +1153,7 @@ fn export_needs_a_medium() {
     let (dir, session) = common::solved_row(&[]);
     let fit = session.join("fit.json");
     let out = dir.path().join("export");
-    let (code, _, err) = common::wb(&[
-        "--quiet",
-        "export",
-        fit.to_str().unwrap(),
-        "--to",
-        "mitsuba",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, err) = export(&fit, "mitsuba", &out);
     assert_ne!(code, 0);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(
