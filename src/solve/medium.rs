@@ -3,23 +3,13 @@
 //! fit.json's `"medium"` and its notes.
 
 use super::load::Loaded;
+use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
-use super::Options;
 use crate::error::{Error, Result};
 use crate::fit::medium::{self, MediumFit, Radius, Setup, MODEL_ERROR};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson};
 use crate::model::idx;
-
-/// Which model `solve` fits the photos with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum SolveModel {
-    /// The CDRF alone (the source paper's model, extended).
-    #[default]
-    Cdrf,
-    /// The CDRF, then the medium from its light, η and lobe.
-    Medium,
-}
 
 /// The profile's name in fit.json.
 pub const PROFILE: &str =

@@ -1,7 +1,6 @@
 //! What a solve is asked: the job's own options (where, which method, what to reuse, which
 //! figures) and the fit's settings ([`Settings`], the one settings type of a fit).
 
-use super::medium::SolveModel;
 use crate::fit::joint::Settings;
 use crate::formats::fit::Method;
 use std::path::PathBuf;
@@ -49,4 +48,14 @@ impl Options {
             ..self.fit
         }
     }
+}
+
+/// Which model `solve` fits the photos with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SolveModel {
+    /// The CDRF alone (the source paper's model, extended).
+    #[default]
+    Cdrf,
+    /// The CDRF, then the medium from its light, η and lobe.
+    Medium,
 }

@@ -3,8 +3,6 @@
 //! transport mean free path, the surface's diffuse albedo), by their gradients in u.
 
 use super::problem::{Problem, ETA};
-use super::MediumFit;
-use crate::model::dipole::{Dipole, Medium};
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{DMatrix, DVector};
 
@@ -161,95 +159,4 @@ fn jackknife(problem: &Problem, r: &DVector<f64>, jac: &DMatrix<f64>) -> Option<
             })
             .collect(),
     )
-}
-
-/// A value per channel with its std.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PerChannel {
-    pub value: [f64; 3],
-    pub std: [f64; 3],
-}
-
-/// What a renderer takes, with stated errors.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Derived {
-    pub sigma_a: PerChannel,
-    pub sigma_s_reduced: PerChannel,
-    pub eta: (f64, f64),
-    /// The transport mean free path 1/σt′ (mm).
-    pub mean_free_path: PerChannel,
-    /// The dipole's total diffuse reflectance of a flat surface of the medium (Jensen et al.).
-    pub diffuse_albedo: PerChannel,
-    /// The irradiance per channel (its std 0 when given).
-    pub irradiance: PerChannel,
-}
-
-impl MediumFit {
-    /// The quantities a renderer takes, each std from the covariance by its gradient in u.
-    pub fn derived(&self) -> Derived {
-        // gᵀCg over the parameters g reaches (a not-determined one elsewhere stays out).
-        let var = |g: &DVector<f64>| {
-            let mut v = 0.0;
-            for i in (0..g.len()).filter(|&i| g[i] != 0.0) {
-                for j in (0..g.len()).filter(|&j| g[j] != 0.0) {
-                    v += g[i] * self.covariance[(i, j)] * g[j];
-                }
-            }
-            v
-        };
-        let sqrt = |v: f64| {
-            if v.is_nan() {
-                f64::NAN
-            } else {
-                v.max(0.0).sqrt()
-            }
-        };
-        let n = self.u.len();
-        let per = |f: &dyn Fn(&Medium) -> f64| -> PerChannel {
-            let mut out = PerChannel {
-                value: [0.0; 3],
-                std: [0.0; 3],
-            };
-            for c in 0..3 {
-                let m = self.media[c];
-                out.value[c] = f(&m);
-                // ∂/∂ln σa, ∂/∂ln σs′ by central differences of 1e-5; ∂/∂ln(η − 1) likewise.
-                let h = 1e-5;
-                let mut g = DVector::zeros(n);
-                let moved = |da: f64, ds: f64, de: f64| {
-                    f(&Medium {
-                        sigma_a: m.sigma_a * da.exp(),
-                        sigma_s_reduced: m.sigma_s_reduced * ds.exp(),
-                        eta: 1.0 + (m.eta - 1.0) * de.exp(),
-                    })
-                };
-                g[c] = (moved(h, 0.0, 0.0) - moved(-h, 0.0, 0.0)) / (2.0 * h);
-                g[3 + c] = (moved(0.0, h, 0.0) - moved(0.0, -h, 0.0)) / (2.0 * h);
-                g[ETA] = (moved(0.0, 0.0, h) - moved(0.0, 0.0, -h)) / (2.0 * h);
-                out.std[c] = sqrt(var(&g));
-            }
-            out
-        };
-        let irradiance = PerChannel {
-            value: self.irradiance,
-            std: std::array::from_fn(|c| {
-                if self.irradiance_given {
-                    0.0
-                } else {
-                    self.irradiance[c] * sqrt(self.covariance[(7 + c, 7 + c)])
-                }
-            }),
-        };
-        Derived {
-            sigma_a: per(&|m| m.sigma_a),
-            sigma_s_reduced: per(&|m| m.sigma_s_reduced),
-            eta: (
-                self.media[0].eta,
-                (self.media[0].eta - 1.0) * sqrt(self.covariance[(ETA, ETA)]),
-            ),
-            mean_free_path: per(&|m| 1.0 / m.sigma_t_reduced()),
-            diffuse_albedo: per(&|m| Dipole::new(m).total()),
-            irradiance,
-        }
-    }
 }

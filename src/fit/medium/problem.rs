@@ -6,7 +6,7 @@
 //! reaches: a channel's σa and σs′ change only its own profiles (one per radius), η all of them,
 //! and E enters linearly (its column is −prediction/σ exactly).
 
-use super::{Radius, Setup};
+use super::pixels::{Radius, Setup};
 use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
 use crate::model::sphere_diffusion::{SphereDiffusion, Tabulated};
@@ -281,7 +281,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Px, Radius, Setup};
+    use super::super::pixels::{Px, Radius, Setup};
     use super::*;
     use nalgebra::Vector3;
 

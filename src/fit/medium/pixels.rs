@@ -1,0 +1,84 @@
+//! The medium fit's inputs: what it is given besides the pixels ([`Setup`]), and the pixels it
+//! fits, pooled by radius ([`pixels`]).
+
+use crate::fit::observe::SphereData;
+use nalgebra::Vector3;
+
+/// What the medium fit is given besides the pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setup {
+    /// The light, toward it, in the frame of the observations' normals.
+    pub light: Vector3<f64>,
+    /// η's prior: the joint fit's η and its std.
+    pub eta_prior: (f64, f64),
+    /// The boundary's GGX roughness (the lobe's α; 0: smooth).
+    pub alpha: f64,
+    /// The light's irradiance in the photos' units, when known.
+    pub irradiance: Option<f64>,
+    /// The largest sphere's radius (mm): it bounds σs′ (`MAX_SIGMA_T_RADIUS`).
+    pub largest_radius: f64,
+}
+
+/// One pixel and channel: where it lies and what it saw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Px {
+    /// n·l and n·v.
+    pub cos_theta: f64,
+    pub cos_phi: f64,
+    pub radiance: f64,
+    /// 1/σ of its noise.
+    pub weight: f64,
+}
+
+/// Every sphere of one radius: its pixels per channel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Radius {
+    pub radius_mm: f64,
+    pub pixels: [Vec<Px>; 3],
+}
+
+/// Whether a pixel is fitted: its half vector more than 25° from the normal (out of the lobe)
+/// and φ within 75° (off the rim).
+pub fn fitted(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
+    let h = (light + v).normalize();
+    n.dot(&h) <= 25f64.to_radians().cos() && n.dot(v) >= 75f64.to_radians().cos()
+}
+
+/// The spheres' fitted pixels, pooled by radius (in increasing radius).
+pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
+    let mut radii: Vec<Radius> = Vec::new();
+    for s in spheres {
+        let at = match radii
+            .iter()
+            .position(|r| (r.radius_mm - s.radius_mm).abs() < 1e-9)
+        {
+            Some(i) => i,
+            None => {
+                radii.push(Radius {
+                    radius_mm: s.radius_mm,
+                    pixels: [vec![], vec![], vec![]],
+                });
+                radii.len() - 1
+            }
+        };
+        for o in &s.obs {
+            let (n, v) = (o.geometry.normal, o.geometry.view);
+            if !fitted(&n, &v, light) {
+                continue;
+            }
+            for c in 0..3 {
+                if o.weight[c] > 0.0 {
+                    radii[at].pixels[c].push(Px {
+                        cos_theta: n.dot(light),
+                        cos_phi: n.dot(&v),
+                        radiance: o.radiance[c],
+                        weight: o.weight[c],
+                    });
+                }
+            }
+        }
+    }
+    radii.retain(|r| r.pixels.iter().all(|p| !p.is_empty()));
+    radii.sort_by(|a, b| a.radius_mm.total_cmp(&b.radius_mm));
+    radii
+}
