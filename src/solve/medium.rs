@@ -63,10 +63,13 @@ pub(super) fn run(
         notes.push("medium: not fitted — no sphere has pixels in every channel away from the highlight and the rim".into());
         return None;
     }
+    let t0 = std::time::Instant::now();
     let start = medium::start(&radii, &setup, m.sigma0_mm);
-    let f = medium::fit(&radii, &setup, &start);
+    let mut f = medium::fit(&radii, &setup, &start);
+    // The start's scan and the held-out prediction count with the fit.
     let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
+    f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
     Some(json(&f, holdout))
 }

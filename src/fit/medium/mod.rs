@@ -63,7 +63,8 @@ pub struct MediumFit {
 /// physically based renders they agree within 20%), and the reduced albedo α′ from the level:
 /// on the largest sphere, the α′ of [`START_ALBEDOS`] whose prediction needs the least scale
 /// (weighted least squares) to meet the pixels. Without the irradiance, α′ = 0.95 and the scale
-/// is E's start. One profile per candidate and channel.
+/// is E's start. One profile per candidate and channel, for the candidates whose σs′ lies in
+/// the fit's range.
 pub fn start(radii: &[Radius], setup: &Setup, sigma0_mm: [f64; 3]) -> Vec<f64> {
     let eta = setup.eta_prior.0.clamp(1.1, 2.4);
     let largest = radii.last().expect("a radius to fit");
@@ -104,8 +105,18 @@ pub fn start(radii: &[Radius], setup: &Setup, sigma0_mm: [f64; 3]) -> Vec<f64> {
         let a = match setup.irradiance {
             Some(_) => {
                 use rayon::prelude::*;
-                let scales: Vec<f64> = START_ALBEDOS.par_iter().map(|&a| scale(a, c)).collect();
-                START_ALBEDOS
+                // Only candidates inside the fit's range: past it a profile costs seconds
+                // (α′ 0.999 put soap's σt′R at 255).
+                let within: Vec<f64> = START_ALBEDOS
+                    .iter()
+                    .copied()
+                    .filter(|&a| {
+                        medium(a, c).sigma_s_reduced
+                            <= problem::sigma_s_range(setup.largest_radius).1
+                    })
+                    .collect();
+                let scales: Vec<f64> = within.par_iter().map(|&a| scale(a, c)).collect();
+                within
                     .iter()
                     .zip(scales)
                     .filter(|(_, s)| s.is_finite() && *s > 0.0)
