@@ -144,11 +144,7 @@ impl SphereDiffusion {
 
     /// M(θ) tabulated every half degree from 0 to 180°, for many pixels.
     pub fn tabulate(&self) -> Tabulated {
-        Tabulated(
-            (0..=360)
-                .map(|k| self.m((k as f64 * 0.5).to_radians().cos()))
-                .collect(),
-        )
+        Tabulated::from_fn(|c| self.m(c))
     }
 
     /// The coefficients with the sources placed by `sources`.
@@ -297,6 +293,15 @@ impl SphereDiffusion {
 pub struct Tabulated(Vec<f64>);
 
 impl Tabulated {
+    /// Any M(θ), given as a function of cos θ, every half degree.
+    pub fn from_fn(m_of: impl Fn(f64) -> f64) -> Tabulated {
+        Tabulated(
+            (0..=360)
+                .map(|k| m_of((k as f64 * 0.5).to_radians().cos()))
+                .collect(),
+        )
+    }
+
     /// M at cos θ.
     pub fn at(&self, cos_theta: f64) -> f64 {
         let k = cos_theta.clamp(-1.0, 1.0).acos().to_degrees() * 2.0;

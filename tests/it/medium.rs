@@ -6,9 +6,10 @@
 use crate::common;
 use nalgebra::Vector3;
 use std::path::Path;
+use workbench::fit::medium::fitted;
 use workbench::model::boundary::Boundary;
 use workbench::model::dipole::{Dipole, Medium};
-use workbench::model::sphere_diffusion::SphereDiffusion;
+use workbench::model::sphere_diffusion::{SphereDiffusion, Tabulated};
 use workbench::model::sphere_profile::{over_sphere, radiance_factor};
 
 /// Which model predicts M(θ).
@@ -62,25 +63,6 @@ fn truth(dir: &Path) -> Truth {
     }
 }
 
-/// M(θ) tabulated every half degree, interpolated linearly in θ.
-struct HalfDegree(Vec<f64>);
-
-impl HalfDegree {
-    fn new(m_of: impl Fn(f64) -> f64) -> HalfDegree {
-        HalfDegree(
-            (0..=360)
-                .map(|k| m_of((k as f64 * 0.5).to_radians().cos()))
-                .collect(),
-        )
-    }
-
-    fn at(&self, cos_theta: f64) -> f64 {
-        let k = cos_theta.clamp(-1.0, 1.0).acos().to_degrees() * 2.0;
-        let (i, f) = ((k.floor() as usize).min(359), k.fract());
-        self.0[i] * (1.0 - f) + self.0[i + 1] * f
-    }
-}
-
 /// The physically based sessions: pbr-wax, pbr-soap and (with ../shared) pbr-jade.
 fn render_sessions() -> Vec<std::path::PathBuf> {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -112,13 +94,6 @@ fn load_quiet(dir: &Path) -> workbench::solve::Loaded {
         o
     })
     .unwrap()
-}
-
-/// Whether a pixel is compared: away from the highlight (its half vector more than 25° from the
-/// normal) and the rim (φ within 75°, where the rough boundary and the outline's pixels rule).
-fn compared(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
-    let h = (light + v).normalize();
-    n.dot(&h) <= 25f64.to_radians().cos() && n.dot(v) >= 75f64.to_radians().cos()
 }
 
 /// Per channel, per θ band of [`BANDS`]: a mean ratio, or None.
@@ -155,12 +130,12 @@ fn ratios(dir: &Path, predictor: Predictor) -> Vec<(String, f64, PerChannelBands
                     ),
                     Predictor::ShellSources | Predictor::BeamSources => sphere.m(cos_theta),
                 };
-                let table = HalfDegree::new(m_of);
+                let table = Tabulated::from_fn(m_of);
                 let mut sums = [(0.0, 0usize); 6];
                 for o in &s.obs {
                     let (n, v) = (o.geometry.normal, o.geometry.view);
                     let (cos_theta, cos_phi) = (n.dot(&t.light), n.dot(&v));
-                    if !compared(&n, &v, &t.light) {
+                    if !fitted(&n, &v, &t.light) {
                         continue;
                     }
                     let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
@@ -234,13 +209,22 @@ fn smooth_tally(
     photons: u64,
     seed: u64,
 ) -> workbench::synth::photon_tally::Tally {
+    tally((radius, sigma_t, albedo, eta, 0.0), photons, seed)
+}
+
+/// The photon tally of one sphere: (radius, σt, albedo, η, GGX α; α 0 is smooth).
+fn tally(
+    (radius, sigma_t, albedo, eta, alpha): (f64, f64, f64, f64, f64),
+    photons: u64,
+    seed: u64,
+) -> workbench::synth::photon_tally::Tally {
     workbench::synth::photon_tally::trace(
         &workbench::synth::photon_tally::TallyScene {
             radius,
             sigma_t,
             albedo,
             eta,
-            alpha: 0.0,
+            alpha,
         },
         photons,
         seed,
@@ -440,7 +424,7 @@ fn fit_pixels(dir: &Path, t: &Truth) -> Vec<(f64, [Pixels; 3])> {
                     .iter()
                     .filter_map(|o| {
                         let (n, v) = (o.geometry.normal, o.geometry.view);
-                        (compared(&n, &v, &t.light) && o.weight[c] > 0.0).then_some((
+                        (fitted(&n, &v, &t.light) && o.weight[c] > 0.0).then_some((
                             n.dot(&t.light),
                             n.dot(&v),
                             o.radiance[c],
@@ -489,7 +473,7 @@ fn medium_residuals(
             } else {
                 SphereDiffusion::with_sources(&m, radius, Sources::Beam(4))
             };
-            let table = HalfDegree::new(|c| model.m(c));
+            let table = Tabulated::from_fn(|c| model.m(c));
             px.iter()
                 .map(|&(ct, cp, l, w)| {
                     let mm = table.at(ct);
@@ -843,19 +827,8 @@ fn the_rough_boundary_transmits_as_the_sampled_one() {
 /// to 0.999. Asserted: 80–90° within 0.92–1.08 and Fresnel's > 1.2; 0–60° within 0.98–1.02.
 #[test]
 fn the_rough_entry_follows_the_photon_tally() {
-    use workbench::synth::photon_tally::{trace, TallyScene};
     let (radius, sigma_t, albedo, eta, alpha) = (35.0, 1.0, 0.92, 1.44, 0.15);
-    let t = trace(
-        &TallyScene {
-            radius,
-            sigma_t,
-            albedo,
-            eta,
-            alpha,
-        },
-        1_000_000,
-        3,
-    );
+    let t = tally((radius, sigma_t, albedo, eta, alpha), 1_000_000, 3);
     let m = Medium::isotropic(sigma_t, albedo, eta);
     let rough = SphereDiffusion::through(&m, radius, &Boundary::rough(eta, alpha));
     let smooth = SphereDiffusion::corrected(&m, radius);
@@ -1188,23 +1161,12 @@ fn the_medium_is_refused_with_the_papers_method() {
 #[ignore = "by hand: cargo test --release --test it -- --ignored medium::rough_level_against_the_photon_tally --nocapture"]
 fn rough_level_against_the_photon_tally() {
     use nalgebra::{DMatrix, DVector};
-    use workbench::synth::photon_tally::{trace, TallyScene};
     let mut rows = vec![];
     for (radius, sigma_t) in [(15.0, 0.5), (25.0, 1.0), (35.0, 2.0)] {
         for eta in [1.35, 1.5, 1.62] {
             for albedo in [0.9, 0.97, 0.995] {
                 for alpha in [0.05, 0.1, 0.15, 0.25] {
-                    let t = trace(
-                        &TallyScene {
-                            radius,
-                            sigma_t,
-                            albedo,
-                            eta,
-                            alpha,
-                        },
-                        400_000,
-                        17,
-                    );
+                    let t = tally((radius, sigma_t, albedo, eta, alpha), 400_000, 17);
                     let m = Medium::isotropic(sigma_t, albedo, eta);
                     let b = Boundary::rough(eta, alpha);
                     let model = SphereDiffusion::through(&m, radius, &b);

@@ -1,6 +1,7 @@
 //! What a renderer takes from the medium fit, with stated errors: σa, σs′, η, the transport mean
 //! free path and the surface's diffuse albedo, each std by its gradient in the fit's u.
 
+use super::errors::std_of;
 use super::problem::ETA;
 use crate::model::dipole::{Dipole, Medium};
 use nalgebra::{DMatrix, DVector};
@@ -44,13 +45,7 @@ pub(super) fn of(
         }
         v
     };
-    let sqrt = |v: f64| {
-        if v.is_nan() {
-            f64::NAN
-        } else {
-            v.max(0.0).sqrt()
-        }
-    };
+    let sqrt = std_of;
     let n = covariance.nrows();
     let per = |f: &dyn Fn(&Medium) -> f64| -> PerChannel {
         let mut out = PerChannel {

@@ -57,13 +57,7 @@ pub(super) fn of(problem: &Problem) -> Errors {
         .evaluations
         .load(std::sync::atomic::Ordering::Relaxed)
         - before;
-    let sqrt = |v: f64| {
-        if v.is_nan() {
-            f64::NAN
-        } else {
-            v.max(0.0).sqrt()
-        }
-    };
+    let sqrt = std_of;
     let m = problem.pixel_rows();
     let pixels_ss: f64 = r.rows(0, m).iter().map(|v| v * v).sum();
     let residual_over_noise = (pixels_ss / m as f64).sqrt();
@@ -96,6 +90,15 @@ pub(super) fn of(problem: &Problem) -> Errors {
         std_jackknife,
         residual_over_noise,
         profiles,
+    }
+}
+
+/// A standard error from a variance: NaN stays NaN (not determined), rounding below 0 is 0.
+pub(super) fn std_of(variance: f64) -> f64 {
+    if variance.is_nan() {
+        f64::NAN
+    } else {
+        variance.max(0.0).sqrt()
     }
 }
 

@@ -83,6 +83,12 @@ pub(super) fn sigma_s_range(largest: f64) -> (f64, f64) {
 /// u → the three media, the irradiance per channel (the setup's when given) and the boundary,
 /// each held inside its range.
 pub(super) fn physical(u: &[f64], setup: &Setup) -> Physical {
+    physical_through(u, setup, None)
+}
+
+/// [`physical`] with `boundary` when it is already built for u's η (its quadrature is the
+/// costly part of a small fit's step).
+fn physical_through(u: &[f64], setup: &Setup, boundary: Option<&Boundary>) -> Physical {
     let within = |v: f64, (lo, hi): (f64, f64)| v.clamp(-30.0, 30.0).exp().clamp(lo, hi);
     let eta = 1.0 + within(u[ETA], (ETA_RANGE.0 - 1.0, ETA_RANGE.1 - 1.0));
     let media = std::array::from_fn(|c| Medium {
@@ -97,7 +103,9 @@ pub(super) fn physical(u: &[f64], setup: &Setup) -> Physical {
     Physical {
         media,
         irradiance,
-        boundary: Boundary::rough(eta, setup.alpha),
+        boundary: boundary
+            .cloned()
+            .unwrap_or_else(|| Boundary::rough(eta, setup.alpha)),
     }
 }
 
@@ -237,20 +245,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         let base = self.all_residuals(&self.u, &self.tables);
         let mut jac = DMatrix::zeros(self.rows(), self.u.len());
-        // A channel's σa and σs′: only its own rows move.
+        // A channel's σa and σs′: only its own rows and profiles move, η and the boundary stay.
+        let boundary = &physical(self.u.as_slice(), self.setup).boundary;
         for c in 0..3 {
             for k in [c, 3 + c] {
                 let mut u = self.u.clone();
                 u[k] += STEP;
-                let p = physical(u.as_slice(), self.setup);
-                let mut tables = self.tables.clone();
+                let p = physical_through(u.as_slice(), self.setup, Some(boundary));
                 let fresh = profiles(self.radii, &p, &[c]);
                 self.count(1);
-                for (t, f) in tables.iter_mut().zip(fresh) {
-                    t[c] = f[c].clone();
-                }
                 let mut moved = base.as_slice().to_vec();
-                self.channel_residuals(&p, &tables, c, &mut moved);
+                self.channel_residuals(&p, &fresh, c, &mut moved);
                 for (row, (a, b)) in moved.iter().zip(base.iter()).enumerate() {
                     jac[(row, k)] = (a - b) / STEP;
                 }
