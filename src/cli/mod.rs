@@ -52,6 +52,9 @@ pub(crate) enum Command {
     View(ViewArgs),
     /// Write a fit's measured medium (`solve --model medium`) for Mitsuba, pbrt, Blender or Unreal.
     Export(ExportArgs),
+    /// Path-trace a fit's measured medium back into every sphere and compare it with the photos,
+    /// beside the medium model and the CDRF (closing the loop).
+    CloseLoop(CloseLoopArgs),
     /// Check a session folder against its files: images, sizes, intrinsics, exposures.
     Check {
         /// The session folder (or its session.json).
@@ -234,6 +237,24 @@ pub(crate) struct ExportArgs {
     /// The folder the files go into (default: `export/` beside fit.json).
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub(crate) struct CloseLoopArgs {
+    /// fit.json with a "medium" (written by `solve --model medium`).
+    pub(crate) fit: PathBuf,
+    /// The folder close-loop.json and its figure go into (default: `close-loop/` beside fit.json).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Samples per pixel; the render's own noise is taken out of its error.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(2..=1_000_000))]
+    pub(crate) spp: u32,
+    /// Pixels rendered per sphere at most (every k-th of the medium fit's pixels beyond it).
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    pub(crate) pixels: u64,
+    /// The render's random seed.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
 }
 
 /// `export --to`.

@@ -3,7 +3,7 @@
 
 use super::{beside, Report};
 use crate::cli::*;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use std::fmt;
 use std::path::PathBuf;
 use workbench::formats::fit::FitFile;
@@ -14,25 +14,9 @@ pub(crate) fn export(a: ExportArgs) -> Result<Exported> {
         .with_context(|| format!("export {}", a.fit.display()))?;
     fit.validate(&a.fit)
         .with_context(|| format!("export {}", a.fit.display()))?;
-    let Some(m) = &fit.medium else {
-        bail!(
-            "{}: no \"medium\" in this fit; run `workbench solve <session> --model medium` first",
-            a.fit.display()
-        );
-    };
-    let positive = m
-        .sigma_a_per_mm
-        .value
-        .iter()
-        .chain(&m.sigma_s_reduced_per_mm.value)
-        .chain(&m.mean_free_path_mm.value)
-        .all(|v| v.is_finite() && *v > 0.0);
-    if !(positive && m.eta.value.is_finite() && m.eta.value > 1.0 && m.alpha.is_finite()) {
-        bail!(
-            "{}: the medium's σa, σs′ and mean free path must be positive and η above 1; this fit's are not (a failed medium fit)",
-            a.fit.display()
-        );
-    }
+    let m = fit
+        .medium(&a.fit)
+        .with_context(|| format!("export {}", a.fit.display()))?;
     let out = a.out.clone().unwrap_or_else(|| beside(&a.fit, "export"));
     let mut targets: Vec<Target> =
         a.to.iter()

@@ -5,6 +5,7 @@ mod bench;
 #[cfg(feature = "opencv")]
 mod calibrate;
 mod check;
+mod close_loop;
 mod detect;
 mod export;
 mod lut;
@@ -45,6 +46,7 @@ pub(crate) fn run(command: Command, quiet: bool) -> Result<Box<dyn Report>> {
         Command::Render(a) => boxed(render::render(a)),
         Command::View(a) => boxed(view::view(a)),
         Command::Export(a) => boxed(export::export(a)),
+        Command::CloseLoop(a) => boxed(close_loop::close_loop(a, quiet)),
         Command::Check { session } => boxed(check::check(session)),
         #[cfg(feature = "opencv")]
         Command::Calibrate(a) => boxed(calibrate::calibrate(a, quiet)),

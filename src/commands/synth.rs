@@ -135,10 +135,7 @@ pub(crate) fn synth_pbr(a: PbrArgs, quiet: bool) -> Result<PbrWritten> {
         radii_mm: a.radii,
         camera: a.camera.camera()?,
         light: a.light.angles(),
-        medium: volpath::Medium {
-            sigma_t: a.sigma_t,
-            albedo: a.albedo,
-        },
+        medium: volpath::Medium::grey(a.sigma_t, a.albedo),
         eta: a.eta,
         alpha: a.alpha,
         spp: a.spp,

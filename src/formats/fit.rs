@@ -564,6 +564,32 @@ impl FitFile {
         }
     }
 
+    /// The fit's measured medium, for a renderer: an error naming `file` when there is none
+    /// (`solve --model medium` wrote none) or when it is not a medium (a failed fit).
+    pub fn medium(&self, file: &Path) -> Result<&MediumJson> {
+        let Some(m) = &self.medium else {
+            return Err(Error::invalid(
+                file,
+                "no \"medium\" in this fit; run `workbench solve <session> --model medium` first",
+            ));
+        };
+        let positive = m
+            .sigma_a_per_mm
+            .value
+            .iter()
+            .chain(&m.sigma_s_reduced_per_mm.value)
+            .chain(&m.mean_free_path_mm.value)
+            .chain(&m.irradiance.value)
+            .all(|v| v.is_finite() && *v > 0.0);
+        if !(positive && m.eta.value.is_finite() && m.eta.value > 1.0 && m.alpha.is_finite()) {
+            return Err(Error::invalid(
+                file,
+                "the medium's σa, σs′, mean free path and irradiance must be positive and η above 1; this fit's are not (a failed medium fit)",
+            ));
+        }
+        Ok(m)
+    }
+
     /// Check what was read: schema and parameter names.
     pub fn validate(&self, file: &Path) -> Result<()> {
         if self.schema != SCHEMA {

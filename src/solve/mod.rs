@@ -31,7 +31,7 @@ pub use load::{fingerprint, load, Loaded};
 pub use medium::PROFILE;
 pub use options::{Options, SolveModel};
 use outcome::{paper_outcome, Outcome};
-pub use replot::replot;
+pub use replot::{load_fit, replot};
 pub use summary::summary;
 
 /// Run `solve` and write fit.json (or reuse the one an identical earlier run wrote).

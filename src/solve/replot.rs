@@ -1,4 +1,5 @@
-//! `workbench plot <fit.json>`: a fit's figures redrawn from fit.json and its session.
+//! `workbench plot <fit.json>`: a fit's figures redrawn from fit.json and its session
+//! ([`load_fit`], which `workbench close-loop` shares).
 
 use crate::error::{Error, Result};
 use crate::formats::fit::FitFile;
@@ -9,6 +10,17 @@ use std::path::{Path, PathBuf};
 /// has moved); detections are reused when up to date.
 pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
     crate::formats::output::check_roots(&[dir])?;
+    let (fit, l) = load_fit(fit_path, quiet)?;
+    let set = crate::formats::output::OutputSet::begin(&[dir])?;
+    let files = crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)?;
+    set.commit()?;
+    Ok(files)
+}
+
+/// fit.json and its session loaded again: the session it names (or session.json beside
+/// fit.json when that has moved), detections reused when up to date, and the same spheres as
+/// the fit's (else an error naming fit.json).
+pub fn load_fit(fit_path: &Path, quiet: bool) -> Result<(FitFile, super::Loaded)> {
     let fit: FitFile = crate::formats::output::read_json(fit_path)?;
     fit.validate(fit_path)?;
     let session = fit.session_path(fit_path)?;
@@ -32,8 +44,5 @@ pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> 
             ),
         ));
     }
-    let set = crate::formats::output::OutputSet::begin(&[dir])?;
-    let files = crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)?;
-    set.commit()?;
-    Ok(files)
+    Ok((fit, l))
 }

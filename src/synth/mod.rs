@@ -4,6 +4,7 @@
 //! (seed, image, row), so the parallel schedule cannot change the output.
 
 pub mod checkerboard;
+pub mod close_loop;
 pub mod dielectric;
 pub mod photon_tally;
 pub mod session;

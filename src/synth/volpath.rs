@@ -1,11 +1,13 @@
 //! `workbench synth pbr`: physically based photos of translucent spheres, rendered by volumetric
 //! path tracing rather than by the CDRF the solver inverts (docs/pbr.md).
 //!
-//! Each sphere is a homogeneous medium (extinction σt, single-scattering albedo per channel,
+//! Each sphere is a homogeneous medium (extinction σt and single-scattering albedo per channel,
 //! isotropic phase function) inside a rough dielectric boundary ([`super::dielectric`]), lit by
 //! one directional light in a black void, seen by the distorted camera (every sample's ray goes
 //! through the lens model, so no image is resampled). A camera path enters through the boundary
-//! (sampled from its BSDF), random-walks the medium by free-flight sampling, reflects off the
+//! (sampled from its BSDF), random-walks the medium by free-flight sampling (when the channels'
+//! σt differ, one channel's drawn per path and the path weighted by the balance heuristic over
+//! the three: one-sample MIS, docs/pbr.md), reflects off the
 //! inside of the boundary when its BSDF says so, and leaves the sphere or is ended by Russian
 //! roulette. The light is a delta in direction, so it is reached only by next-event estimation:
 //! at the first surface hit (the specular reflection) and at every scattering point, where a
@@ -42,18 +44,33 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const TRUTH_SCHEMA: &str = "workbench.pbr-truth/1";
 
-/// The scattering medium: extinction (1/mm, one for all channels) and single-scattering albedo.
+/// The scattering medium: extinction (1/mm) and single-scattering albedo, per channel.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Medium {
-    pub sigma_t: f64,
+    pub sigma_t: [f64; 3],
     pub albedo: [f64; 3],
 }
 
 impl Medium {
+    /// One extinction for all channels.
+    pub fn grey(sigma_t: f64, albedo: [f64; 3]) -> Medium {
+        Medium {
+            sigma_t: [sigma_t; 3],
+            albedo,
+        }
+    }
+
+    /// Whether every channel has the same extinction (free flights need no channel drawn).
+    fn is_grey(&self) -> bool {
+        self.sigma_t.iter().all(|s| *s == self.sigma_t[0])
+    }
+
     /// Diffusion length 1/√(3 σa σt) per channel (isotropic phase: σt′ = σt), in mm.
     pub(crate) fn diffusion_length_mm(&self) -> [f64; 3] {
-        self.albedo
-            .map(|a| 1.0 / (3.0 * (1.0 - a) * self.sigma_t * self.sigma_t).sqrt())
+        std::array::from_fn(|c| {
+            let (a, t) = (self.albedo[c], self.sigma_t[c]);
+            1.0 / (3.0 * (1.0 - a) * t * t).sqrt()
+        })
     }
 }
 
@@ -122,9 +139,9 @@ impl Scene {
         d
     }
 
-    /// Next-event estimate at a scattering point x: the light reaching x through the boundary,
-    /// times the isotropic phase function, for irradiance 1.
-    fn next_event(&self, x: &Vector3<f64>, rng: &mut ChaCha8Rng) -> f64 {
+    /// Next-event estimate at a scattering point x per channel: the light reaching x through
+    /// the boundary, times the isotropic phase function, for irradiance 1.
+    fn next_event(&self, x: &Vector3<f64>, rng: &mut ChaCha8Rng) -> [f64; 3] {
         let g = self.guide(x);
         let beta = self.boundary.alpha;
         let (u0, u1, u2): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
@@ -146,10 +163,10 @@ impl Scene {
         let n = self.normal_at(&y);
         let nl = n.dot(&self.light);
         if nl <= 0.0 {
-            return 0.0;
+            return [0.0; 3];
         }
-        let f = self.boundary.eval(&self.light, &-w, &n);
-        f * nl * (-self.medium.sigma_t * s).exp() / (4.0 * PI * pdf)
+        let f = self.boundary.eval(&self.light, &-w, &n) * nl / (4.0 * PI * pdf);
+        self.medium.sigma_t.map(|t| f * (-t * s).exp())
     }
 
     /// One camera path along the unit ray d from the camera centre. `lamp`: instead of
@@ -181,30 +198,63 @@ impl Scene {
             }
             return out;
         }
+        // thr[c]: the path's value in channel c over its density under the drawing channel j;
+        // q[k]: its density under channel k's σt over that under j. Channel c's estimate is
+        // thr[c] / mean(q): the balance heuristic over the three channels' samplings of the
+        // whole path (one-sample MIS; docs/pbr.md). A grey medium keeps q = 1.
         let mut thr = [s.weight; 3];
+        let mut q = [1.0; 3];
         let (mut p, mut dir) = (y0, s.wi);
-        let albedo = self.medium.albedo;
+        let Medium { sigma_t, albedo } = self.medium;
+        let grey = self.medium.is_grey();
+        let j = if grey {
+            0
+        } else {
+            ((3.0 * rng.random::<f64>()) as usize).min(2)
+        };
+        let weights = |thr: &[f64; 3], q: &[f64; 3]| {
+            let m = (q[0] + q[1] + q[2]) / 3.0;
+            thr.map(|v| v / m)
+        };
         for _ in 0..MAX_EVENTS {
             let t_exit = self.exit(&p, &dir);
             let u: f64 = rng.random();
-            let t = -(1.0 - u).ln() / self.medium.sigma_t;
+            let t = -(1.0 - u).ln() / sigma_t[j];
             if t < t_exit {
                 p += dir * t;
-                (0..3).for_each(|c| thr[c] *= albedo[c]);
+                if grey {
+                    (0..3).for_each(|c| thr[c] *= albedo[c]);
+                } else {
+                    // Value σs_c e^{−σt_c t}; densities σt_k e^{−σt_k t}.
+                    let d = sigma_t.map(|k| k * (-k * t).exp());
+                    (0..3).for_each(|c| {
+                        thr[c] *= albedo[c] * d[c] / d[j];
+                        q[c] *= d[c] / d[j];
+                    });
+                }
+                let w = weights(&thr, &q);
                 if lamp.is_none() {
                     let e = self.next_event(&p, rng);
-                    (0..3).for_each(|c| out.subsurface[c] += thr[c] * e);
+                    (0..3).for_each(|c| out.subsurface[c] += w[c] * e[c]);
                 }
                 out.scatterings += 1;
                 if out.scatterings > ROULETTE_AFTER {
-                    let q = thr.iter().cloned().fold(0.0, f64::max).min(0.95);
-                    if rng.random::<f64>() >= q {
+                    let survive = w.iter().cloned().fold(0.0, f64::max).min(0.95);
+                    if rng.random::<f64>() >= survive {
                         break;
                     }
-                    thr.iter_mut().for_each(|v| *v /= q);
+                    thr.iter_mut().for_each(|v| *v /= survive);
                 }
                 dir = uniform_sphere(rng.random(), rng.random());
             } else {
+                if !grey {
+                    // Value and densities alike: the probability e^{−σt t_exit} of no event.
+                    let tr = sigma_t.map(|k| (-k * t_exit).exp());
+                    (0..3).for_each(|c| {
+                        thr[c] *= tr[c] / tr[j];
+                        q[c] *= tr[c] / tr[j];
+                    });
+                }
                 let y = p + dir * t_exit;
                 let n = self.normal_at(&y);
                 let s = self
@@ -212,7 +262,8 @@ impl Scene {
                     .sample(&-dir, &n, [rng.random(), rng.random(), rng.random()]);
                 if s.transmitted || s.weight == 0.0 {
                     if let Some(le) = sees_lamp(&s.wi).filter(|_| s.transmitted) {
-                        (0..3).for_each(|c| out.subsurface[c] += thr[c] * s.weight * le);
+                        let w = weights(&thr, &q);
+                        (0..3).for_each(|c| out.subsurface[c] += w[c] * s.weight * le);
                     }
                     break; // left the sphere into the black void
                 }
@@ -249,6 +300,70 @@ impl Rendered {
             .map(|(a, b)| [0, 1, 2].map(|c| 0.5 * (a[c] + b[c])))
             .collect()
     }
+}
+
+/// One pixel's mean over `n` samples (uniform inside the pixel box).
+#[derive(Clone, Copy, Debug, Default)]
+struct PixelMean {
+    radiance: [f64; 3],
+    specular: f64,
+    /// Scattering events, and the paths that scattered.
+    scatterings: u64,
+    paths: u64,
+}
+
+fn pixel(
+    cam: &Camera,
+    scene: &Scene,
+    [x, y]: [usize; 2],
+    n: u32,
+    rng: &mut ChaCha8Rng,
+    lamp: Option<f64>,
+) -> PixelMean {
+    let mut out = PixelMean::default();
+    for _ in 0..n {
+        let px = Vector2::new(
+            x as f64 + rng.random::<f64>() - 0.5,
+            y as f64 + rng.random::<f64>() - 0.5,
+        );
+        let Some(d) = cam.ray_for_pixel(px) else {
+            continue;
+        };
+        let v = scene.path(&d, rng, lamp);
+        (0..3).for_each(|c| out.radiance[c] += v.specular + v.subsurface[c]);
+        out.specular += v.specular;
+        if v.scatterings > 0 {
+            out.scatterings += v.scatterings as u64;
+            out.paths += 1;
+        }
+    }
+    out.radiance = out.radiance.map(|a| a / n as f64);
+    out.specular /= n as f64;
+    out
+}
+
+/// Chosen pixels of one sphere, each the mean of `spp` samples split into two halves seeded
+/// from (seed, image, pixel's place in `pixels`) and (seed + 1, …): per pixel, the halves.
+pub fn render_pixels(
+    cam: &Camera,
+    scene: &Scene,
+    pixels: &[[u32; 2]],
+    spp: u32,
+    seed: u64,
+    image: u64,
+) -> Vec<[[f64; 3]; 2]> {
+    let half = (spp / 2).max(1);
+    pixels
+        .par_iter()
+        .enumerate()
+        .map(|(i, &[x, y])| {
+            let at = [x as usize, y as usize];
+            [0, 1].map(|k| {
+                let mut rng = row_rng(seed + k, image, i as u64);
+                pixel(cam, scene, at, half, &mut rng, None).radiance
+            })
+        })
+        .collect()
 }
 
 /// Render one sphere: `spp` samples per pixel (box filter: uniform inside each pixel), split
@@ -288,28 +403,12 @@ pub fn render_with(
             for k in 0..2u64 {
                 let mut rng = row_rng(seed + k, image, y as u64);
                 for i in 0..n {
-                    let x = bx[0] + i;
-                    let mut acc = [0.0; 3];
-                    let mut spec = 0.0;
-                    for _ in 0..half {
-                        let px = Vector2::new(
-                            x as f64 + rng.random::<f64>() - 0.5,
-                            y as f64 + rng.random::<f64>() - 0.5,
-                        );
-                        let Some(d) = cam.ray_for_pixel(px) else {
-                            continue;
-                        };
-                        let v = scene.path(&d, &mut rng, lamp);
-                        (0..3).for_each(|c| acc[c] += v.specular + v.subsurface[c]);
-                        spec += v.specular;
-                        if v.scatterings > 0 {
-                            r.3 += v.scatterings as u64;
-                            r.4 += 1;
-                        }
-                    }
+                    let v = pixel(cam, scene, [bx[0] + i, y], half, &mut rng, lamp);
+                    r.3 += v.scatterings;
+                    r.4 += v.paths;
                     let dst = if k == 0 { &mut r.0 } else { &mut r.1 };
-                    dst[i] = acc.map(|a| a / half as f64);
-                    r.2[i] += 0.5 * spec / half as f64;
+                    dst[i] = v.radiance;
+                    r.2[i] += 0.5 * v.specular;
                 }
             }
             (y, r)
@@ -361,10 +460,14 @@ fn check(cfg: &PbrConfig) -> Result<()> {
         return bad("give at least one radius, every one positive");
     }
     let m = &cfg.medium;
-    let valid =
-        m.sigma_t > 0.0 && m.sigma_t.is_finite() && m.albedo.iter().all(|a| (0.0..1.0).contains(a));
+    let valid = m.sigma_t.iter().all(|t| *t > 0.0 && t.is_finite())
+        && m.albedo.iter().all(|a| (0.0..1.0).contains(a));
     if !valid {
         return bad("medium: σt must be positive and every albedo in [0, 1)");
+    }
+    if !m.is_grey() {
+        // truth.json (workbench.pbr-truth/1) states one σt.
+        return bad("medium: a session takes one σt for all channels");
     }
     if !(cfg.eta > 1.0 && cfg.eta < 4.0 && cfg.alpha >= 0.001 && cfg.alpha <= 1.0) {
         return bad("boundary: η must lie in (1, 4) and α in [0.001, 1]");
@@ -609,7 +712,7 @@ fn pbr_truth(cfg: &PbrConfig, scale: f64, photos: Vec<TruthPhoto>) -> PbrTruth {
             name: cfg.material_name.clone(),
             eta: cfg.eta,
             alpha: cfg.alpha,
-            sigma_t_per_mm: cfg.medium.sigma_t,
+            sigma_t_per_mm: cfg.medium.sigma_t[0],
             albedo_rgb: cfg.medium.albedo,
             diffusion_length_mm_rgb: cfg.medium.diffusion_length_mm(),
         },

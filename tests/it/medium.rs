@@ -901,6 +901,58 @@ fn the_medium_of_the_soap_renders() {
     );
     assert!(h.medium_rel_rmse < h.cdrf_rel_rmse, "{h:?}");
     exports_read_back(&dir.path().join("fit.json"), m);
+    the_loop_closes(&dir.path().join("fit.json"), m);
+}
+
+/// `close-loop`: the fitted medium path-traced back into every sphere meets the photos as well
+/// as the medium model the fit minimised does (the model is independent code: diffusion in the
+/// sphere, not a random walk). Measured on soap (15 mm held out of the fit) at 1024 spp, 600
+/// pixels a sphere: path-traced 4.31 ± 0.17%, model 4.06%, so 1.06 of it (per radius
+/// 0.87–1.15; at 2000 pixels without the hold-out 1.02–1.03 for two seeds), the CDRF 5.61%.
+/// Asserted: 0.85–1.2 overall (the goal is 1.5) and the CDRF worse than the
+/// path-traced medium; the rendered medium is σt = σa + σs′, albedo σs′/σt; the figure is
+/// drawn.
+fn the_loop_closes(fit: &Path, m: &workbench::formats::fit::MediumJson) {
+    let out = fit.with_file_name("loop");
+    let (code, _, err) = common::wb(&[
+        "--quiet",
+        "close-loop",
+        fit.to_str().unwrap(),
+        "--pixels",
+        "600",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let j: workbench::synth::close_loop::CloseLoopJson =
+        serde_json::from_str(&std::fs::read_to_string(out.join("close-loop.json")).unwrap())
+            .unwrap();
+    for c in 0..3 {
+        let (a, s) = (m.sigma_a_per_mm.value[c], m.sigma_s_reduced_per_mm.value[c]);
+        assert!((j.rendered.sigma_t_per_mm[c] - (a + s)).abs() < 1e-12 * (a + s));
+        assert!((j.rendered.albedo[c] - s / (a + s)).abs() < 1e-12);
+    }
+    let o = &j.overall;
+    println!(
+        "close-loop: path-traced {:.4} ± {:.4}, model {:.4}, CDRF {:.4}, photo noise {:.4}",
+        o.render_rel_rmse,
+        o.render_rel_rmse_std,
+        o.medium_rel_rmse,
+        o.cdrf_rel_rmse,
+        o.photo_noise_rel
+    );
+    for r in &j.radii {
+        println!(
+            "  r {} mm: path-traced/model {:.3}",
+            r.radius_mm, r.comparison.render_over_medium
+        );
+    }
+    assert!((0.85..1.2).contains(&o.render_over_medium), "{o:?}");
+    assert!(o.cdrf_rel_rmse > o.render_rel_rmse, "{o:?}");
+    assert_eq!(j.radii.len(), 5);
+    assert!(j.radii.iter().all(|r| r.bands.len() > 20));
+    let png = image::open(out.join("close-loop.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (1500, 60 + 340 * 3));
 }
 
 /// `export --to mitsuba,pbrt,blender,unreal` of a medium fit, each file read back by a parser
@@ -1127,6 +1179,21 @@ fn export_needs_a_medium() {
     let fit = session.join("fit.json");
     let out = dir.path().join("export");
     let (code, err) = export(&fit, "mitsuba", &out);
+    assert_ne!(code, 0);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("--model medium") && err.contains("fit.json"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // close-loop needs one too: the same line, nothing written.
+    let (code, _, err) = common::wb(&[
+        "--quiet",
+        "close-loop",
+        fit.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_ne!(code, 0);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(

@@ -180,8 +180,30 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
 
 /// The fitted medium's prediction of `radius`'s pixels, per channel (radiance units).
 pub fn predict(f: &MediumFit, setup: &Setup, radius: &Radius) -> [Vec<f64>; 3] {
-    let p = physical(f.u.as_slice(), setup);
-    let t = profiles(std::slice::from_ref(radius), &p, &[0, 1, 2]);
+    predict_physical(&physical(f.u.as_slice(), setup), radius)
+}
+
+/// A medium's prediction of `radius`'s pixels (radiance units) under `irradiance`, through
+/// the GGX boundary of roughness `alpha` (a medium read back from fit.json).
+pub fn predict_with(
+    media: [Medium; 3],
+    irradiance: [f64; 3],
+    alpha: f64,
+    radius: &Radius,
+) -> [Vec<f64>; 3] {
+    let boundary = crate::model::boundary::Boundary::rough(media[0].eta, alpha);
+    predict_physical(
+        &problem::Physical {
+            media,
+            irradiance,
+            boundary,
+        },
+        radius,
+    )
+}
+
+fn predict_physical(p: &problem::Physical, radius: &Radius) -> [Vec<f64>; 3] {
+    let t = profiles(std::slice::from_ref(radius), p, &[0, 1, 2]);
     std::array::from_fn(|c| {
         let table = t[0][c].as_ref().expect("every channel's profile");
         radius.pixels[c]
