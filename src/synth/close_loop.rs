@@ -191,7 +191,7 @@ fn camera(l: &crate::solve::Loaded, fit_path: &Path) -> Result<Camera> {
         ));
     }
     match &l.proj {
-        Projection::Perspective(c) => Ok(c.clone()),
+        Projection::Perspective(c) => Ok(*c),
         Projection::Orthographic => Err(Error::invalid(
             fit_path,
             "close-loop needs the session's camera (intrinsics.json); this session is orthographic",
@@ -504,7 +504,8 @@ pub fn figure(json: &CloseLoopJson) -> Figure {
             dashed: true,
             label: None,
         });
-        let lines: [(&str, fn(&Band) -> [f64; 3], _, bool); 3] = [
+        type Prediction = fn(&Band) -> [f64; 3];
+        let lines: [(&str, Prediction, _, bool); 3] = [
             (
                 "fitted medium, path-traced",
                 |b| b.render,
