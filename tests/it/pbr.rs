@@ -174,13 +174,14 @@ fn renders_per_channel_extinction_as_three_grey_media() {
     let b = bands(&cam, &grey.sphere, &l, &images, 20.0, 1.5, &|_| false);
     let mut worst: f64 = 0.0;
     for (k, (sums, n)) in b.iter().enumerate().take(5) {
+        let [mixed, grey, var_mixed, var_grey] = [0, 1, 2, 3].map(|i| sums[i]);
         for c in 0..3 {
-            let z = (sums[0][c] - sums[1][c]) / (sums[2][c] + sums[3][c]).sqrt();
+            let z = (mixed[c] - grey[c]) / (var_mixed[c] + var_grey[c]).sqrt();
             println!(
                 "θ {}–{}° ({n} px) channel {c}: mixed/grey {:.4}, {z:+.2} joint std",
                 20 * k,
                 20 * k + 20,
-                sums[0][c] / sums[1][c]
+                mixed[c] / grey[c]
             );
             worst = worst.max(z.abs());
         }
