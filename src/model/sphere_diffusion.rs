@@ -248,7 +248,8 @@ impl SphereDiffusion {
             .collect();
         let table = log_i_ratios(&rows, x, order);
         let mut c = vec![0.0; order + 1];
-        for (theta_e, w) in entry_nodes(order) {
+        // The entry points resolve the orders kept whole; those rolled off need no more.
+        for (theta_e, w) in entry_nodes(cut.roll_off.map_or(order, |r| order.min(r.0))) {
             let (sin_e, cos_e) = theta_e.sin_cos();
             let entering = boundary.transmission(cos_e) * cos_e * sin_e * w;
             let sin_t = sin_e / eta;
