@@ -2,14 +2,16 @@
 //! detection, the fit with the light's hold, and the jackknife — each stage timed against
 //! decoding the photos in the same run ([`solve_fresh`]); and the many-photo session they are
 //! also measured on, one light per photo, as photometric-stereo sets such as DiLiGenT's are
-//! taken ([`per_image_session`]).
+//! taken ([`per_image_session`]); and `solve --model medium` on a fresh copy of the bundled
+//! physically based soap session, against its truth ([`medium_fresh`]).
 
 use nalgebra::Vector3;
 use std::path::Path;
 use workbench::error::{Error, Result};
 use workbench::formats::session::{LightMode, Session, SessionImage};
-use workbench::solve::{self, Options};
+use workbench::solve::{self, Options, SolveModel};
 use workbench::synth::session::{self, SessionConfig};
+use workbench::synth::volpath::PbrTruth;
 
 /// One end-to-end solve: its stages' seconds (fit.json's timings) and its errors.
 pub(super) struct EndToEnd {
@@ -92,4 +94,69 @@ pub(super) fn per_image_session(
     });
     workbench::formats::output::write_json(&dir.join("session.json"), &session)?;
     truth.ok_or_else(|| Error::Argument("a per-image session needs one photo or more".into()))
+}
+
+/// `solve --model medium` on a fresh copy: its stages' seconds, and σa and σs′ against the truth.
+pub(super) struct MediumEndToEnd {
+    pub decode_s: f64,
+    pub detect_s: f64,
+    pub solve_s: f64,
+    pub jackknife_s: f64,
+    pub medium_s: f64,
+    pub total_s: f64,
+    /// The worst channel's error of σa and of σs′ (%), and the light's (degrees).
+    pub sigma_a_error_pct: f64,
+    pub sigma_s_error_pct: f64,
+    pub light_error_deg: f64,
+}
+
+/// `solve --model medium --irradiance <truth>` on `dir`, a fresh copy of the physically based
+/// session `src` (its photos, session.json, intrinsics.json and truth.json): what a user waits
+/// for, and the medium against the renders' truth.
+pub(super) fn medium_fresh(src: &Path, dir: &Path) -> Result<MediumEndToEnd> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    for entry in std::fs::read_dir(src).map_err(|e| Error::io(src, e))? {
+        let path = entry.map_err(|e| Error::io(src, e))?.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if name.ends_with(".png")
+            || ["session.json", "intrinsics.json", "truth.json"].contains(&name)
+        {
+            std::fs::copy(&path, dir.join(name)).map_err(|e| Error::io(&path, e))?;
+        }
+    }
+    let truth: PbrTruth = workbench::formats::output::read_json(&dir.join("truth.json"))?;
+    let mut o = Options::new(dir);
+    o.quiet = true;
+    o.model = SolveModel::Medium;
+    o.fit.irradiance = Some(truth.irradiance_in_png_units);
+    let f = solve::run(&o)?;
+    let m = f
+        .medium
+        .as_ref()
+        .ok_or_else(|| Error::invalid(dir, "the medium fit wrote no medium"))?;
+    let mat = &truth.material;
+    let worst = |fitted: &[f64; 3], truth: &dyn Fn(usize) -> f64| {
+        100.0
+            * (0..3)
+                .map(|c| (fitted[c] / truth(c) - 1.0).abs())
+                .fold(0.0, f64::max)
+    };
+    let t = &f.timings;
+    Ok(MediumEndToEnd {
+        decode_s: t.decode_s,
+        detect_s: t.detect_s,
+        solve_s: t.solve_s,
+        jackknife_s: t.jackknife_s,
+        medium_s: t.medium_s,
+        total_s: t.total_s,
+        sigma_a_error_pct: worst(&m.sigma_a_per_mm.value, &|c| {
+            (1.0 - mat.albedo_rgb[c]) * mat.sigma_t_per_mm
+        }),
+        sigma_s_error_pct: worst(&m.sigma_s_reduced_per_mm.value, &|c| {
+            mat.albedo_rgb[c] * mat.sigma_t_per_mm
+        }),
+        light_error_deg: Vector3::from(f.light_direction)
+            .angle(&Vector3::from(truth.light.direction_to_light_camera_frame))
+            .to_degrees(),
+    })
 }

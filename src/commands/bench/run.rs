@@ -195,12 +195,13 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     for dir in data.iter().map(|d| session_dir(opts, &d.name)).chain([
         checkerboard_dir(opts),
         session_dir(opts, &per_image_name(opts.quick)),
+        session_dir(opts, MEDIUM_NAME),
     ]) {
         replaceable(&dir)?;
     }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let settings = reductions();
-    let steps = data.len() * (3 + settings.len()) + 2;
+    let steps = data.len() * (3 + settings.len()) + 3;
     let pb = workbench::progress::bar(steps as u64, "bench", opts.quiet);
     let mut rows = vec![];
     #[cfg(feature = "opencv")]
@@ -270,6 +271,8 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     }
     rows.extend(per_image_rows(opts, &data[0])?);
     pb.inc(1);
+    rows.extend(medium_rows(opts)?);
+    pb.inc(1);
     pb.finish_and_clear();
     let report = BenchReport {
         schema: SCHEMA.into(),
@@ -308,6 +311,49 @@ fn per_image_rows(opts: &BenchOptions, first: &Data) -> Result<Vec<Row>> {
     mark_dir(&dir)?;
     let e = end_to_end::solve_fresh(&dir, sigma0, light)?;
     Ok(end_to_end_rows(&name, &e))
+}
+
+/// The bundled physically based session `solve --model medium` is timed on.
+const MEDIUM_SOURCE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/datasets/pbr-soap");
+const MEDIUM_NAME: &str = "pbr-soap, --model medium";
+
+/// `solve --model medium` end to end on a fresh copy of the bundled soap renders (none where the
+/// build's source tree is gone), its medium stage among the rows and σa, σs′ against the truth.
+fn medium_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
+    let src = Path::new(MEDIUM_SOURCE);
+    if !src.join("truth.json").is_file() {
+        return Ok(vec![]);
+    }
+    let dir = session_dir(opts, MEDIUM_NAME);
+    fresh_dir(&dir)?;
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    mark_dir(&dir)?;
+    let e = end_to_end::medium_fresh(src, &dir)?;
+    let stages = EndToEnd {
+        decode_s: e.decode_s,
+        detect_s: e.detect_s,
+        solve_s: e.solve_s,
+        jackknife_s: e.jackknife_s,
+        total_s: e.total_s,
+        sigma0_error_pct: f64::NAN,
+        light_error_deg: e.light_error_deg,
+    };
+    let mut rows = end_to_end_rows(MEDIUM_NAME, &stages);
+    let total = rows.pop().expect("the total's row");
+    rows.push(Row {
+        setting: "medium fit".into(),
+        seconds: e.medium_s,
+        error: None,
+        error_unit: String::new(),
+        light_error_deg: None,
+        ..total.clone()
+    });
+    rows.push(Row {
+        error: Some(e.sigma_a_error_pct.max(e.sigma_s_error_pct)),
+        error_unit: "σa, σs′ %".into(),
+        ..total
+    });
+    Ok(rows)
 }
 
 /// The stages of one end-to-end solve as rows (stage "end to end"), each with the decoding of
@@ -528,9 +574,9 @@ pub fn markdown(r: &BenchReport) -> String {
 fn end_to_end_table(r: &BenchReport) -> String {
     use std::fmt::Write;
     let mut s = String::from(
-        "\n`solve` on a fresh folder, every default on, each stage against decoding the photos:\n\n\
-         | data | decoding (s) | detection | fit and light hold | jackknife | total | total (s) |\n\
-         |---|---:|---:|---:|---:|---:|---:|\n",
+        "\n`solve` on a fresh folder, every default on (the pbr-soap row with `--model medium --irradiance`), each stage against decoding the photos:\n\n\
+         | data | decoding (s) | detection | fit and light hold | jackknife | medium fit | total | total (s) |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for n in sessions_of(r, "end to end") {
         let get = |setting: &str| {
@@ -548,13 +594,14 @@ fn end_to_end_table(r: &BenchReport) -> String {
         let total = get("total");
         let _ = writeln!(
             s,
-            "| {n} | {} | {} | {} | {} | {} | {} |",
+            "| {n} | {} | {} | {} | {} | {} | {} | {} |",
             total
                 .and_then(|x| x.decode_s)
                 .map_or("–".to_string(), |d| format!("{d:.3}")),
             ratio("detection"),
             ratio("fit and light hold"),
             ratio("jackknife"),
+            ratio("medium fit"),
             ratio("total"),
             total.map_or("–".to_string(), |x| format!("{:.2}", x.seconds))
         );
@@ -674,7 +721,7 @@ mod tests {
         };
         let md = markdown(&r);
         assert!(
-            md.contains("| e | 0.250 | 4× | 10× | 2× | 17× | 4.25 |"),
+            md.contains("| e | 0.250 | 4× | 10× | 2× | – | 17× | 4.25 |"),
             "{md}"
         );
         let names: Vec<String> = reductions().into_iter().map(|r| r.0).collect();
