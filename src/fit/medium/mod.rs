@@ -105,8 +105,8 @@ pub fn start(radii: &[Radius], setup: &Setup, sigma0_mm: [f64; 3]) -> Vec<f64> {
         let a = match setup.irradiance {
             Some(_) => {
                 use rayon::prelude::*;
-                // Only candidates inside the fit's range: past it a profile costs seconds
-                // (α′ 0.999 put soap's σt′R at 255).
+                // Only candidates inside the fit's range: a start past it (α′ 0.999 put soap's
+                // σt′R at 255) is one the fit could not take.
                 let within: Vec<f64> = START_ALBEDOS
                     .iter()
                     .copied()

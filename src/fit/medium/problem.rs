@@ -33,8 +33,8 @@ pub(super) struct Physical {
 }
 
 /// The range the fit may explore: σa and σs′ (1/mm) and η. Past σt′R of about 150 the sphere is
-/// a diffuse surface to the camera (its light spreads under 1/150 of its radius) and the series
-/// costs seconds per profile, so σs′ stops at 150 over the largest radius.
+/// a diffuse surface to the camera (its light spreads under 1/150 of its radius, finer than M's
+/// rolled-off series resolves), so σs′ stops at 150 over the largest radius.
 pub(super) const SIGMA_A_RANGE: (f64, f64) = (1e-5, 5.0);
 pub(super) const ETA_RANGE: (f64, f64) = (1.05, 2.5);
 pub(super) const MAX_SIGMA_T_RADIUS: f64 = 150.0;
