@@ -82,6 +82,37 @@ pub struct Session {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub floor: Option<f64>,
     pub images: Vec<SessionImage>,
+    /// A diffuse reference of known reflectance in one of the photos (a grey card, a
+    /// reflectance standard): it gives the light's irradiance when `solve --irradiance` does not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<SessionReference>,
+}
+
+/// A matte card of known reflectance under the session's light, in one of its photos.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionReference {
+    /// The photo it is in: one of `images`.
+    pub image: String,
+    /// The pixels to average, [x0, y0, x1, y1] with x0 ≤ x < x1, y0 ≤ y < y1 (the photo as
+    /// decoded upright): inside the card, clear of its edges and of the spheres.
+    pub box_px: [u32; 4],
+    /// Its diffuse reflectance (0–1; a grey card 0.18, a reflectance standard as calibrated).
+    pub reflectance: f64,
+    /// Which way it faces: the light (default) or the camera.
+    #[serde(default)]
+    pub facing: Facing,
+}
+
+/// The reference card's normal.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Facing {
+    /// Toward the light: its radiance is ρE/π.
+    #[default]
+    Light,
+    /// Toward the camera: ρE cos θ/π, θ between the camera's axis and the light.
+    Camera,
 }
 
 fn is_shared(m: &LightMode) -> bool {
@@ -186,6 +217,26 @@ impl Session {
                 }
             }
         }
+        if let Some(r) = &self.reference {
+            if !self.images.iter().any(|im| same_file(&im.file, &r.image)) {
+                return bad(format!(
+                    "reference: image {:?} is not one of the session's images",
+                    r.image
+                ));
+            }
+            if !(r.reflectance.is_finite() && r.reflectance > 0.0 && r.reflectance <= 1.0) {
+                return bad(format!(
+                    "reference: reflectance must lie in (0, 1], got {}",
+                    r.reflectance
+                ));
+            }
+            let [x0, y0, x1, y1] = r.box_px;
+            if !(x0 < x1 && y0 < y1) {
+                return bad(format!(
+                    "reference: box_px [{x0}, {y0}, {x1}, {y1}] is empty (x0 < x1 and y0 < y1)"
+                ));
+            }
+        }
         let lamps = self
             .images
             .iter()
@@ -218,7 +269,7 @@ impl Session {
 pub const RADIUS_RANGE_MM: std::ops::Range<f64> = 1e-3..1e5;
 
 /// Whether two photo paths of session.json name the same file, `./` components aside.
-fn same_file(a: &str, b: &str) -> bool {
+pub(crate) fn same_file(a: &str, b: &str) -> bool {
     let norm = |p: &str| -> PathBuf {
         Path::new(p)
             .components()

@@ -31,7 +31,7 @@ pub(super) fn check(opts: &Options) -> Result<()> {
 /// The medium fit after the joint fit `outcome`, on the spheres `is_held` does not hold out.
 pub(super) fn run(
     opts: &Options,
-    l: &Loaded,
+    (l, given_by): (&Loaded, &str),
     outcome: &Outcome,
     is_held: impl Fn(&SphereData) -> bool,
     notes: &mut Vec<String>,
@@ -71,7 +71,7 @@ pub(super) fn run(
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
-    Some(json(&f, holdout))
+    Some(json(&f, holdout, given_by))
 }
 
 /// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.
@@ -119,7 +119,7 @@ fn holdout(
 fn say(f: &MediumFit, notes: &mut Vec<String>) {
     if !f.irradiance_given {
         notes.push(
-            "medium: no --irradiance, so the light's level was fitted with the medium: σa and σs′ rest on the profile's shape across the radii and are poorly determined (their errors say how poorly); give the irradiance (pixel value / exposure of a surface facing the light) to measure them".into(),
+            "medium: no --irradiance, so the light's level was fitted with the medium: σa and σs′ rest on the profile's shape across the radii and are poorly determined (their errors say how poorly); give the irradiance to measure them (--irradiance, or a grey card in one photo: session.json's \"reference\", docs/formats.md)".into(),
         );
     }
     if f.residual_over_noise > MISFIT {
@@ -145,7 +145,8 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     }
 }
 
-fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>) -> MediumJson {
+/// fit.json's medium; `given_by` says where a given irradiance came from.
+fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> MediumJson {
     let d = f.derived();
     let per = |p: medium::PerChannel| PerChannelJson {
         value: p.value,
@@ -164,7 +165,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>) -> MediumJson {
         diffuse_albedo: per(d.diffuse_albedo),
         irradiance: per(d.irradiance),
         irradiance_source: if f.irradiance_given {
-            "given (--irradiance)".into()
+            given_by.into()
         } else {
             "fitted with the medium (no --irradiance)".into()
         },

@@ -18,6 +18,7 @@ use std::path::Path;
 use std::time::Instant;
 
 mod file;
+mod irradiance;
 mod load;
 mod medium;
 mod options;
@@ -75,10 +76,28 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         .unwrap_or_else(|| l.report.session_file.with_file_name("fit.json"));
     check_holdout(opts, &l)?;
     medium::check(opts)?;
+    // Without --irradiance, session.json's diffuse reference gives it (fit.json keeps the options
+    // as asked, for the reuse check).
+    let asked = load::fingerprint(opts);
+    let reference = match opts.fit.irradiance {
+        Some(_) => None,
+        None => irradiance::from_reference(&l)?,
+    };
+    let with_reference;
+    let opts = match &reference {
+        Some(r) => {
+            let mut o = opts.clone();
+            o.fit.irradiance = Some(r.irradiance);
+            with_reference = o;
+            &with_reference
+        }
+        None => opts,
+    };
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
     let mut notes: Vec<String> = unfitted_floor_note(opts, &l)
         .into_iter()
         .chain(scattered_highlights_note(&l.detections))
+        .chain(reference.as_ref().map(irradiance::note))
         .collect();
     let t_solve = Instant::now();
     if opts.method == Method::Joint {
@@ -120,10 +139,18 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     pb.inc(1);
     let medium = (opts.model == SolveModel::Medium)
-        .then(|| medium::run(opts, &l, &outcome, is_held, &mut notes))
+        .then(|| {
+            let source = reference
+                .as_ref()
+                .map_or("given (--irradiance)".to_string(), |r| {
+                    format!("the diffuse reference in {} (session.json)", r.image)
+                });
+            medium::run(opts, (&l, &source), &outcome, is_held, &mut notes)
+        })
         .flatten();
     l.timings.medium_s = medium.as_ref().map_or(0.0, |m| m.seconds);
     let mut fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
+    fit.options = asked;
     fit.medium = medium;
     // One set: the figures, then fit.json (what the reuse check trusts) last.
     let mut roots: Vec<&Path> = vec![&out];

@@ -705,6 +705,7 @@ pub fn generate(
         light: Default::default(),
         floor: None,
         images: session_images,
+        reference: None,
     };
     let truth = session_truth(cfg, truth_images);
     let session_file = out.join("session.json");

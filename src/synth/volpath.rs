@@ -580,6 +580,7 @@ pub fn generate(cfg: &PbrConfig, out: &Path, quiet: bool) -> Result<PbrOutput> {
                 linear: None,
             })
             .collect(),
+        reference: None,
     };
     write_json(&out.join("session.json"), &session)?;
     let truth = pbr_truth(cfg, scale, photos);

@@ -1133,3 +1133,148 @@ fn disturbed_outlines_over_seeds() {
         "σ0 {worst_sigma}, {within_1pc}"
     );
 }
+
+/// A grey card in one of the photos (session.json's `"reference"`) gives the light's irradiance
+/// when `--irradiance` does not: the soap renders with a matte patch painted beside the 35 mm
+/// sphere at a known reflectance's radiance, ρE/π facing the light and ρE cos θ/π facing the
+/// camera (θ from the renders' true light). The irradiance read back is the renders' own to the
+/// card's 16-bit rounding (measured 2.4e-6 of 1.3e-5 facing the light; facing the camera 2.0e-5
+/// of 3.1e-5 against the detected light's cos θ, which is 0.13% off the truth's), and the fit
+/// equals the one given that irradiance on the command line (parameters within 1e-6). A box on the
+/// sphere, and a clipped card, are refused in one line naming session.json, nothing written.
+#[test]
+fn a_grey_card_gives_the_irradiance() {
+    use workbench::synth::volpath::PbrTruth;
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
+    let truth: PbrTruth =
+        serde_json::from_str(&std::fs::read_to_string(src.join("truth.json")).unwrap()).unwrap();
+    let e = truth.irradiance_in_png_units;
+    let l = Vector3::from(truth.light.direction_to_light_camera_frame);
+    // The card: 40 × 40 pixels at (40, 450), away from the sphere; the box inside it.
+    let card = |dir: &Path, value: f64, facing: &str, box_px: [u32; 4]| {
+        let p = dir.join("r35.png");
+        let mut img = image::open(&p).unwrap().into_rgb16();
+        let v = (value.clamp(0.0, 1.0) * 65535.0).round() as u16;
+        for y in 450..490 {
+            for x in 40..80 {
+                img.put_pixel(x, y, image::Rgb([v, v, v]));
+            }
+        }
+        img.save(&p).unwrap();
+        let s = dir.join("session.json");
+        let mut j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&s).unwrap()).unwrap();
+        j["reference"] = serde_json::json!({
+            "image": "r35.png", "box_px": box_px, "reflectance": 0.5, "facing": facing
+        });
+        // The card is a bright blob too: the sphere of its photo is hinted (docs/formats.md).
+        j["images"][0]["spheres"][0]["center_px"] = serde_json::json!([443.2, 268.5]);
+        j["images"][0]["spheres"][0]["radius_px"] = serde_json::json!(70.0);
+        std::fs::write(&s, serde_json::to_string_pretty(&j).unwrap()).unwrap();
+    };
+    let inside = [45, 455, 75, 485];
+    // The card's value is rounded to 16 bits: E is read to half a level step over the value.
+    let quantised = |value: f64| 1.5 * 0.5 / (value * 65535.0);
+    let solve = |dir: &Path, extra: &[&str]| {
+        let d = dir.to_str().unwrap();
+        let mut args = vec!["--quiet", "solve", d];
+        args.extend(extra);
+        common::wb(&args)
+    };
+    let fit_of = |dir: &Path| -> FitFile {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
+    };
+    let ks = |f: &FitFile| f.parameters.iter().find(|p| p.name == "ks").unwrap().value;
+    // Facing the light, against the same fit given the irradiance.
+    let with_card = common::session_copy(&src);
+    card(
+        with_card.path(),
+        0.5 * e / std::f64::consts::PI,
+        "light",
+        inside,
+    );
+    let (code, _, err) = solve(with_card.path(), &[]);
+    assert_eq!(code, 0, "{err}");
+    let f = fit_of(with_card.path());
+    println!("facing the light: E {:.6} (truth {e:.6})", ks(&f));
+    let value = 0.5 * e / std::f64::consts::PI;
+    assert!(
+        (ks(&f) / e - 1.0).abs() < quantised(value),
+        "{} {e}",
+        ks(&f)
+    );
+    assert!(
+        f.notes
+            .iter()
+            .any(|n| n.contains("diffuse reference in r35.png")),
+        "{:?}",
+        f.notes
+    );
+    // The same folder (the same detections) with that irradiance given: the same fit.
+    let out = with_card.path().join("given.json");
+    let (code, _, err) = solve(
+        with_card.path(),
+        &[
+            "--irradiance",
+            &format!("{}", ks(&f)),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let g: FitFile = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for (a, b) in f.parameters.iter().zip(&g.parameters) {
+        assert!(
+            (a.value - b.value).abs() <= 1e-6 * b.value.abs().max(1e-3),
+            "{} {} {}",
+            a.name,
+            a.value,
+            b.value
+        );
+    }
+    // Facing the camera: cos θ = −l_z, read with the detected light (its error enters E as
+    // tan θ × the light's error, which the note states).
+    let facing_camera = common::session_copy(&src);
+    card(
+        facing_camera.path(),
+        0.5 * e * -l.z / std::f64::consts::PI,
+        "camera",
+        inside,
+    );
+    let (code, _, err) = solve(facing_camera.path(), &[]);
+    assert_eq!(code, 0, "{err}");
+    let f = fit_of(facing_camera.path());
+    let det: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(facing_camera.path().join("detections.json")).unwrap(),
+    )
+    .unwrap();
+    let detected = -det["light_direction"][2].as_f64().unwrap();
+    let expected = e * -l.z / detected;
+    println!(
+        "facing the camera: E {:.6} (expected with the detected light {expected:.6}, truth {e:.6}, cos θ {:.4})",
+        ks(&f),
+        -l.z
+    );
+    let value = 0.5 * e * -l.z / std::f64::consts::PI;
+    assert!(
+        (ks(&f) / expected - 1.0).abs() < quantised(value),
+        "{} {expected}",
+        ks(&f)
+    );
+    let note = f.notes.iter().find(|n| n.contains("facing the camera"));
+    println!("{note:?}");
+    assert!(note.is_some(), "{:?}", f.notes);
+    // Refused: a box on the sphere; a clipped card.
+    for (value, box_px, what) in [
+        (0.3, [400, 250, 420, 270], "overlaps sphere"),
+        (2.0, inside, "clipped"),
+    ] {
+        let dir = common::session_copy(&src);
+        card(dir.path(), value, "light", box_px);
+        let (code, _, err) = solve(dir.path(), &[]);
+        assert_ne!(code, 0);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("session.json") && err.contains(what), "{err}");
+        assert!(!dir.path().join("fit.json").exists());
+    }
+}
