@@ -28,6 +28,7 @@
 use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
 use crate::model::fresnel;
+use crate::model::lanes::{f64x4, Real};
 use crate::model::quadrature::nodes;
 
 /// The series of one medium on one sphere: M(θ) = Σ c_l P_l(cos θ).
@@ -262,44 +263,32 @@ impl SphereDiffusion {
             );
             // The beam crosses the sphere in a chord 2R cos θt; a node beyond it has left.
             let chord = 2.0 * radius * cos_t;
-            for (&sn, &sw) in s_nodes.iter().zip(s_weights.iter()) {
+            // The beam's sources (at most four) in lanes: each its cos Θ, its four table rows
+            // and their cubic Lagrange weights, its power (0: an empty lane, or past the chord).
+            let mut lanes = BeamLanes::default();
+            for (j, (&sn, &sw)) in s_nodes.iter().zip(s_weights.iter()).enumerate() {
                 let s = sn / st;
                 if s >= chord {
                     continue;
                 }
                 let p = (radius * sin_e + s * dir.0, radius * cos_e + s * dir.1);
                 let r_true = (p.0 * p.0 + p.1 * p.1).sqrt();
-                let cos_big = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
+                lanes.cos_big[j] = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
                 let r = r_true.clamp(r_lo, r_hi);
                 let at = (r - r_lo) / (r_hi - r_lo) * ROWS as f64;
                 // Cubic Lagrange through four rows (linear moved M by up to 1e-5 as the rows
                 // shifted with σt′, which the fit's differences magnified to 2–4% of a column).
-                let first = (at.floor() as usize).clamp(1, ROWS - 2) - 1;
-                let t = at - first as f64;
-                let w = [
+                lanes.first[j] = (at.floor() as usize).clamp(1, ROWS - 2) - 1;
+                let t = at - lanes.first[j] as f64;
+                lanes.w[j] = [
                     -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0,
                     t * (t - 2.0) * (t - 3.0) / 2.0,
                     -t * (t - 1.0) * (t - 3.0) / 2.0,
                     t * (t - 1.0) * (t - 2.0) / 6.0,
                 ];
-                let rows = [
-                    &table[first],
-                    &table[first + 1],
-                    &table[first + 2],
-                    &table[first + 3],
-                ];
-                let weight = entering * sw;
-                for (l, p_l) in legendre(cos_big).take(order + 1).enumerate() {
-                    let q = w[0] * rows[0][l]
-                        + w[1] * rows[1][l]
-                        + w[2] * rows[2][l]
-                        + w[3] * rows[3][l];
-                    if q < -40.0 {
-                        break;
-                    }
-                    c[l] += weight * p_l * q.exp();
-                }
+                lanes.power[j] = entering * sw;
             }
+            lanes.add_to(&mut c, &table, order);
         }
         let coefficients = c
             .iter()
@@ -320,6 +309,49 @@ impl SphereDiffusion {
             .zip(legendre(cos_theta.clamp(-1.0, 1.0)))
             .map(|(c, p)| c * p)
             .sum()
+    }
+}
+
+/// One entry point's beam sources side by side, one a lane: their Legendre recurrences run
+/// together ([`legendre`] in lanes: one recurrence's chain of dependent products was what a
+/// source's orders waited on) and their ratios are exponentiated in lanes.
+#[derive(Clone, Copy, Debug, Default)]
+struct BeamLanes {
+    cos_big: [f64; 4],
+    /// The first of the four table rows around each source's radius, and their weights.
+    first: [usize; 4],
+    w: [[f64; 4]; 4],
+    /// The source's power (entering light × its Laguerre weight); 0 leaves the lane out.
+    power: [f64; 4],
+}
+
+impl BeamLanes {
+    /// c_l += Σ_sources power · P_l(cos Θ) · i_l(κr)/i_l(κR) for l ≤ `order`, each source
+    /// until its ratio falls below e^{−40}.
+    fn add_to(&self, c: &mut [f64], table: &[Vec<f64>], order: usize) {
+        let mut alive = self.power.map(|p| p != 0.0);
+        let power = f64x4::new(self.power);
+        let mut p_l = legendre(f64x4::new(self.cos_big));
+        for (l, cl) in c.iter_mut().enumerate().take(order + 1) {
+            let q: [f64; 4] = std::array::from_fn(|j| {
+                if !alive[j] {
+                    return -1e3; // e^q is 0 in lanes
+                }
+                let (rows, w) = (&table[self.first[j]..self.first[j] + 4], &self.w[j]);
+                let q =
+                    w[0] * rows[0][l] + w[1] * rows[1][l] + w[2] * rows[2][l] + w[3] * rows[3][l];
+                if q < -40.0 {
+                    alive[j] = false;
+                    return -1e3;
+                }
+                q
+            });
+            if !alive.iter().any(|a| *a) {
+                break;
+            }
+            let p = p_l.next().expect("endless");
+            *cl += (power * p * f64x4::new(q).exp()).reduce_add();
+        }
     }
 }
 
@@ -345,12 +377,15 @@ impl Tabulated {
     }
 }
 
-/// P_0(x), P_1(x), P_2(x), … by Bonnet's recurrence, (l + 1) P_{l+1} = (2l + 1) x P_l − l P_{l−1}.
-fn legendre(x: f64) -> impl Iterator<Item = f64> {
-    let mut state = (0usize, 1.0, x);
+/// P_0(x), P_1(x), P_2(x), … by Bonnet's recurrence, (l + 1) P_{l+1} = (2l + 1) x P_l − l P_{l−1},
+/// on one x or on four in lanes.
+fn legendre<R: Real>(x: R) -> impl Iterator<Item = R> {
+    let mut state = (0usize, R::splat(1.0), x);
     std::iter::from_fn(move || {
         let (l, p, next) = state;
-        let after = ((2 * l + 3) as f64 * x * next - (l + 1) as f64 * p) / (l + 2) as f64;
+        // The reciprocal stays off the recurrence's chain (a division on it costs the most).
+        let inv = 1.0 / (l + 2) as f64;
+        let after = (x * next * (2 * l + 3) as f64 - p * (l + 1) as f64) * inv;
         state = (l + 1, next, after);
         Some(p)
     })

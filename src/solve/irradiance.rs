@@ -6,6 +6,7 @@
 //! E = π L / (ρ cos θ) per channel; the fit takes their mean (docs/formats.md, session.json).
 
 use super::load::Loaded;
+use super::options::Options;
 use crate::error::{Error, Result};
 use crate::formats::session::{same_file, Facing, Session, SessionReference};
 use nalgebra::Vector3;
@@ -99,6 +100,26 @@ pub fn from_reference(l: &Loaded) -> Result<Option<Reference>> {
         pixels,
         relative_std,
     }))
+}
+
+/// `opts` with the reference's irradiance when `--irradiance` is not given, and the reference.
+pub(super) fn apply(opts: &Options, l: &Loaded) -> Result<(Option<Reference>, Options)> {
+    let reference = match opts.fit.irradiance {
+        Some(_) => None,
+        None => from_reference(l)?,
+    };
+    let mut with = opts.clone();
+    if let Some(r) = &reference {
+        with.fit.irradiance = Some(r.irradiance);
+    }
+    Ok((reference, with))
+}
+
+/// Where a given irradiance came from, as fit.json's medium says it.
+pub(super) fn source(reference: Option<&Reference>) -> String {
+    reference.map_or("given (--irradiance)".to_string(), |r| {
+        format!("the diffuse reference in {} (session.json)", r.image)
+    })
 }
 
 /// The note a reference's irradiance gets: where it came from, and its channels when they differ.

@@ -79,20 +79,8 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     // Without --irradiance, session.json's diffuse reference gives it (fit.json keeps the options
     // as asked, for the reuse check).
     let asked = load::fingerprint(opts);
-    let reference = match opts.fit.irradiance {
-        Some(_) => None,
-        None => irradiance::from_reference(&l)?,
-    };
-    let with_reference;
-    let opts = match &reference {
-        Some(r) => {
-            let mut o = opts.clone();
-            o.fit.irradiance = Some(r.irradiance);
-            with_reference = o;
-            &with_reference
-        }
-        None => opts,
-    };
+    let (reference, with_reference) = irradiance::apply(opts, &l)?;
+    let opts = &with_reference;
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
     let mut notes: Vec<String> = unfitted_floor_note(opts, &l)
         .into_iter()
@@ -140,11 +128,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     pb.inc(1);
     let medium = (opts.model == SolveModel::Medium)
         .then(|| {
-            let source = reference
-                .as_ref()
-                .map_or("given (--irradiance)".to_string(), |r| {
-                    format!("the diffuse reference in {} (session.json)", r.image)
-                });
+            let source = irradiance::source(reference.as_ref());
             medium::run(opts, (&l, &source), &outcome, is_held, &mut notes)
         })
         .flatten();
