@@ -1178,15 +1178,19 @@ fn export_needs_a_medium() {
     let (dir, session) = common::solved_row(&[]);
     let fit = session.join("fit.json");
     let out = dir.path().join("export");
+    // One line naming fit.json and `--model medium`, nothing written.
+    let refused = |code: i32, err: &str| {
+        assert_ne!(code, 0);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("--model medium") && err.contains("fit.json"),
+            "{err}"
+        );
+        assert!(!out.exists());
+    };
     let (code, err) = export(&fit, "mitsuba", &out);
-    assert_ne!(code, 0);
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("--model medium") && err.contains("fit.json"),
-        "{err}"
-    );
-    assert!(!out.exists());
-    // close-loop needs one too: the same line, nothing written.
+    refused(code, &err);
+    // close-loop needs one too.
     let (code, _, err) = common::wb(&[
         "--quiet",
         "close-loop",
@@ -1194,13 +1198,7 @@ fn export_needs_a_medium() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert_ne!(code, 0);
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("--model medium") && err.contains("fit.json"),
-        "{err}"
-    );
-    assert!(!out.exists());
+    refused(code, &err);
 }
 
 /// The medium needs the joint fit's light and η: with the paper's method it is refused in one
