@@ -212,13 +212,14 @@ impl SphereDiffusion {
     /// Sources along each entry point's refracted beam. A point source of power p at radius r
     /// and polar angle Θ adds p (2l + 1)/(4πR²) P_l(cos Θ) [i_l(κr)/i_l(κR)]/den_l to the l-th
     /// coefficient (the shell's formula, per unit of its area). The entry points are integrated
-    /// in θ as the shell's f_l are; the ratios come from a table over r, interpolated linearly.
+    /// in θ as the shell's f_l are; the ratios come from a table over r, interpolated cubically.
     fn beam(medium: &Medium, radius: f64, n: usize) -> SphereDiffusion {
         Self::beam_cut(medium, radius, n, Cut::FIT, &Boundary::smooth(medium.eta))
     }
 
-    /// [`Self::beam`] with the series cut at order `reach` · R over the shallowest source's
-    /// depth, the light entering through `boundary`.
+    /// [`Self::beam`] with the series cut as `cut` says (at order `reach` · R over the shallowest
+    /// source's depth, its orders past the roll-off's first faded out), the light entering
+    /// through `boundary`.
     fn beam_cut(
         medium: &Medium,
         radius: f64,
