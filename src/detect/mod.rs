@@ -227,16 +227,33 @@ fn hinted_blobs(
     Ok(v)
 }
 
+/// A blob holding a grey card's box is left out as the card when it fills less of the circle of
+/// its extent than this (a square card 0.64, a disc about 1).
+const CARD_FILL: f64 = 0.85;
+
 /// The blobs of the mask that can be spheres: a sphere stands well out of the backdrop; a patch
 /// of backdrop the surface does not follow (a table's edge against the wall) only just crosses
-/// the threshold.
+/// the threshold; a grey card's blob (its bounding box holds the card's `box_px`) is not one.
 fn sphere_blobs(
     img: &LinearRgb,
     mask: &[bool],
     excess: &[f32],
-    thr: f64,
+    (thr, card): (f64, Option<[u32; 4]>),
 ) -> Vec<crate::detect::silhouette::Blob> {
-    let all = blobs(mask, img.width, img.height, Some(excess));
+    // The card's blob holds its box and is no disc (a square fills 2/π of its extent's circle,
+    // a disc all of it): a disc holding the box is a sphere with the box on it, which the
+    // irradiance's reading refuses.
+    let holds_card = |b: &crate::detect::silhouette::Blob| {
+        let fill = b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0);
+        fill < CARD_FILL
+            && card.is_some_and(|[x0, y0, x1, y1]| {
+                b.bbox[0] <= x0 && b.bbox[1] <= y0 && b.bbox[2] + 1 >= x1 && b.bbox[3] + 1 >= y1
+            })
+    };
+    let all: Vec<_> = blobs(mask, img.width, img.height, Some(excess))
+        .into_iter()
+        .filter(|b| !holds_card(b))
+        .collect();
     let biggest = all.iter().map(|b| b.mass).fold(0.0, f64::max);
     all.into_iter()
         .filter(|b| b.mass >= 0.05 * biggest && b.area >= 30 && b.mass >= 4.0 * thr * b.area as f64)
@@ -259,14 +276,15 @@ fn drop_least_disclike(found: &mut Vec<crate::detect::silhouette::Blob>, spheres
 }
 
 /// Find the spheres of one photo and their silhouettes (left to right; `radii` as listed in the
-/// session). `lum` is the photo's [`luminance`]. The steps: the pixels above the backdrop, the
-/// blobs (or the hinted discs), as many as the session lists and none cut by the frame, then each
-/// one's silhouette.
+/// session). `lum` is the photo's [`luminance`]; `card`, the box of a grey card in it (session.json's
+/// reference), whose blob is not a sphere. The steps: the pixels above the backdrop, the blobs (or
+/// the hinted discs), as many as the session lists and none cut by the frame, then each one's
+/// silhouette.
 pub(crate) fn find_spheres(
     img: &LinearRgb,
     lum: &Plane,
     proj: &Projection,
-    spheres: &[crate::formats::session::SessionSphere],
+    (spheres, card): (&[crate::formats::session::SessionSphere], Option<[u32; 4]>),
     path: &Path,
 ) -> Result<Vec<Silhouette>> {
     let radii: Vec<f64> = spheres.iter().map(|s| s.radius_mm).collect();
@@ -275,7 +293,7 @@ pub(crate) fn find_spheres(
     let (excess, mask, thr) = excess_mask(lum, &backdrop);
     let mut found = match &hints {
         Some(h) => hinted_blobs(img, h, path)?,
-        None => sphere_blobs(img, &mask, &excess, thr),
+        None => sphere_blobs(img, &mask, &excess, (thr, card)),
     };
     drop_least_disclike(&mut found, radii.len());
     if found.len() != radii.len() {
@@ -625,7 +643,13 @@ fn outlines<'a>(
         .zip(&sess.images)
         .map(|((img, info), si)| {
             let lum = luminance(img);
-            let f = find_spheres(img, &lum, proj, &si.spheres, &info.path)?;
+            // A grey card in this photo (session.json's reference) is a bright blob too.
+            let card = sess
+                .reference
+                .as_ref()
+                .filter(|r| crate::formats::session::same_file(&r.image, &si.file))
+                .map(|r| r.box_px);
+            let f = find_spheres(img, &lum, proj, (&si.spheres, card), &info.path)?;
             pb.inc(1);
             Ok((img, lum, f))
         })
