@@ -189,6 +189,55 @@ pub struct Observed {
     /// The floor subtracted from each photo (radiance units, per channel; `None`: not measurable,
     /// nothing subtracted).
     pub floors: Vec<Option<[f64; 3]>>,
+    /// session.json's grey card, its pixels read while the photos are decoded.
+    pub reference: Option<ReferencePixels>,
+}
+
+/// session.json's diffuse reference and its box's pixels (linear, as decoded; the part of the
+/// box inside the photo).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferencePixels {
+    pub reference: crate::formats::session::SessionReference,
+    /// The photo it is in (its place in the session).
+    pub image: usize,
+    /// Per channel, the sum of the box's pixel values, and how many.
+    pub sum: [f64; 3],
+    pub pixels: usize,
+    /// The first clipped pixel, if any.
+    pub clipped: Option<[u32; 2]>,
+}
+
+/// The reference's box read from its photo (none without a reference).
+fn reference_pixels(
+    report: &SessionReport,
+    sess: &Session,
+    images: &[LinearRgb],
+) -> Option<ReferencePixels> {
+    let r = sess.reference.as_ref()?;
+    let k = report
+        .images
+        .iter()
+        .position(|i| crate::formats::session::same_file(&i.file, &r.image))?;
+    let img = &images[k];
+    let [x0, y0, x1, y1] = r.box_px;
+    let (mut sum, mut pixels, mut clipped) = ([0.0; 3], 0, None);
+    for y in y0..y1.min(img.height) {
+        for x in x0..x1.min(img.width) {
+            let i = y as usize * img.width as usize + x as usize;
+            if img.saturated[i] && clipped.is_none() {
+                clipped = Some([x, y]);
+            }
+            (0..3).for_each(|c| sum[c] += f64::from(img.data[3 * i + c]));
+            pixels += 1;
+        }
+    }
+    Some(ReferencePixels {
+        reference: r.clone(),
+        image: k,
+        sum,
+        pixels,
+        clipped,
+    })
 }
 
 /// One light per photo (`"light": "per-image"`): the rotation of each photo that takes its light
@@ -376,6 +425,7 @@ pub fn observe(
         decode_s,
         samples_s: t1.elapsed().as_secs_f64(),
         floors,
+        reference: reference_pixels(report, sess, images),
     })
 }
 

@@ -8,7 +8,7 @@
 use super::load::Loaded;
 use super::options::Options;
 use crate::error::{Error, Result};
-use crate::formats::session::{same_file, Facing, Session, SessionReference};
+use crate::formats::session::{Facing, SessionReference};
 use nalgebra::Vector3;
 
 /// The irradiance a reference gave.
@@ -28,21 +28,15 @@ pub struct Reference {
 /// coloured light, or a card that is not grey).
 const COLOURED: f64 = 0.03;
 
-/// The irradiance from session.json's reference, when it has one: `Ok(None)` without.
+/// The irradiance from session.json's reference, when it has one: `Ok(None)` without. Its
+/// box's pixels were read as the photos were decoded ([`crate::fit::observe::ReferencePixels`]).
 pub fn from_reference(l: &Loaded) -> Result<Option<Reference>> {
-    let file = &l.report.session_file;
-    let (session, _) = Session::load(file)?;
-    let Some(r) = session.reference else {
+    let Some((px, floor)) = &l.reference else {
         return Ok(None);
     };
-    let bad = |msg: String| Error::invalid(file, format!("reference: {msg}"));
-    let (k, info) = l
-        .report
-        .images
-        .iter()
-        .enumerate()
-        .find(|(_, i)| same_file(&i.file, &r.image))
-        .ok_or_else(|| bad(format!("image {:?} is not among the photos", r.image)))?;
+    let r = &px.reference;
+    let bad = |msg: String| Error::invalid(&l.report.session_file, format!("reference: {msg}"));
+    let info = &l.report.images[px.image];
     let [x0, y0, x1, y1] = r.box_px;
     if x1 > info.width || y1 > info.height {
         return Err(bad(format!(
@@ -50,31 +44,17 @@ pub fn from_reference(l: &Loaded) -> Result<Option<Reference>> {
             r.image, info.width, info.height
         )));
     }
-    clear_of_spheres(l, k, &r).map_err(bad)?;
-    let img = crate::formats::photo::load_linear_rgb(&info.path, Some(info.linear))?;
-    let mut sum = [0.0; 3];
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let i = y as usize * img.width as usize + x as usize;
-            if img.saturated[i] {
-                return Err(bad(format!(
-                    "pixel ({x}, {y}) of {} is clipped: expose the card below full scale",
-                    r.image
-                )));
-            }
-            (0..3).for_each(|c| sum[c] += f64::from(img.data[3 * i + c]));
-        }
+    clear_of_spheres(l, px.image, r).map_err(bad)?;
+    if let Some([x, y]) = px.clipped {
+        return Err(bad(format!(
+            "pixel ({x}, {y}) of {} is clipped: expose the card below full scale",
+            r.image
+        )));
     }
-    let pixels = ((x1 - x0) * (y1 - y0)) as usize;
     let exposure = info.exposure.unwrap_or(1.0);
     let intensity = info.light_intensity.unwrap_or([1.0; 3]);
-    // The photo's dark floor as the spheres' pixels had it taken off (radiance units).
-    let floor = l
-        .spheres
-        .iter()
-        .find(|s| s.image == info.file)
-        .and_then(|s| s.floor)
-        .unwrap_or([0.0; 3]);
+    // Less the photo's dark floor, as the spheres' pixels (radiance units).
+    let floor = floor.unwrap_or([0.0; 3]);
     let cos = incidence(l, r.facing).map_err(bad)?;
     let relative_std = match r.facing {
         Facing::Light => 0.0,
@@ -84,7 +64,7 @@ pub fn from_reference(l: &Loaded) -> Result<Option<Reference>> {
         }
     };
     let per_channel: [f64; 3] = std::array::from_fn(|c| {
-        let radiance = (sum[c] / pixels as f64 / exposure - floor[c]) / intensity[c];
+        let radiance = (px.sum[c] / px.pixels as f64 / exposure - floor[c]) / intensity[c];
         std::f64::consts::PI * radiance / (r.reflectance * cos)
     });
     if !per_channel.iter().all(|e| e.is_finite() && *e > 0.0) {
@@ -97,7 +77,7 @@ pub fn from_reference(l: &Loaded) -> Result<Option<Reference>> {
         irradiance: per_channel.iter().sum::<f64>() / 3.0,
         per_channel,
         image: r.image.clone(),
-        pixels,
+        pixels: px.pixels,
         relative_std,
     }))
 }

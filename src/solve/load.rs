@@ -32,6 +32,8 @@ pub struct Loaded {
     /// Under `"light": "per-image"` without intensities in session.json: each photo's lamp
     /// intensity as fitted ([`crate::fit::joint::intensity`]), its observations divided by it.
     pub intensities: Option<crate::fit::joint::intensity::PhotoIntensities>,
+    /// session.json's grey card with its box's pixels, and its photo's dark floor (radiance units).
+    pub reference: Option<(crate::fit::observe::ReferencePixels, Option<[f64; 3]>)>,
     pub skipped: Vec<String>,
     pub timings: Timings,
     /// What the fit is made from: the session's input files and detections.json, by content.
@@ -166,6 +168,10 @@ pub(super) fn load_inspected(
         measured,
         frames,
         intensities: None,
+        reference: obs.reference.map(|pixels| {
+            let floor = obs.floors[pixels.image];
+            (pixels, floor)
+        }),
         skipped,
         timings,
         inputs,
