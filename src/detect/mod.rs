@@ -244,8 +244,7 @@ fn sphere_blobs(
     // a disc all of it): a disc holding the box is a sphere with the box on it, which the
     // irradiance's reading refuses.
     let holds_card = |b: &crate::detect::silhouette::Blob| {
-        let fill = b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0);
-        fill < CARD_FILL
+        b.fill() < CARD_FILL
             && card.is_some_and(|[x0, y0, x1, y1]| {
                 b.bbox[0] <= x0 && b.bbox[1] <= y0 && b.bbox[2] + 1 >= x1 && b.bbox[3] + 1 >= y1
             })
@@ -265,11 +264,8 @@ fn sphere_blobs(
 /// crescent of a back-lit sphere fills less than a disc, and is still a sphere.
 fn drop_least_disclike(found: &mut Vec<crate::detect::silhouette::Blob>, spheres: usize) {
     if found.len() > spheres {
-        let fill = |b: &crate::detect::silhouette::Blob| {
-            b.area as f64 / (std::f64::consts::PI * b.extent * b.extent).max(1.0)
-        };
-        found.sort_by(|a, b| fill(b).total_cmp(&fill(a)));
-        while found.len() > spheres && found.last().is_some_and(|b| fill(b) < 0.3) {
+        found.sort_by(|a, b| b.fill().total_cmp(&a.fill()));
+        while found.len() > spheres && found.last().is_some_and(|b| b.fill() < 0.3) {
             found.pop();
         }
     }

@@ -876,6 +876,12 @@ pub struct Blob {
 }
 
 impl Blob {
+    /// The share of the circle of its extent it fills: a disc about 1, a square 2/π, a pin or a
+    /// cable a few percent.
+    pub(crate) fn fill(&self) -> f64 {
+        self.area as f64 / (std::f64::consts::PI * self.extent * self.extent).max(1.0)
+    }
+
     /// Whether the blob touches the image border.
     pub(crate) fn touches_border(&self, width: u32, height: u32) -> bool {
         self.bbox[0] == 0

@@ -265,6 +265,16 @@ pub struct MediumJson {
     pub seconds: f64,
 }
 
+impl MediumJson {
+    /// σt = σa + σs′ and the single-scattering albedo σs′/σt per channel: the medium as a path
+    /// tracer takes it (isotropic phase, so σs′ is σs).
+    pub fn extinction_and_albedo(&self) -> ([f64; 3], [f64; 3]) {
+        let (a, s) = (self.sigma_a_per_mm.value, self.sigma_s_reduced_per_mm.value);
+        let t = std::array::from_fn(|c| a[c] + s[c]);
+        (t, std::array::from_fn(|c| s[c] / t[c]))
+    }
+}
+
 /// A held-out radius's relative RMSE under the medium and under the CDRF.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MediumHoldoutJson {

@@ -47,18 +47,11 @@ fn three(v: [f64; 3], sep: &str) -> String {
     v.map(|x| format!("{x:?}")).join(sep)
 }
 
-/// σt = σa + σs′ and the single-scattering albedo σs′/σt per channel.
-fn extinction_and_albedo(m: &MediumJson) -> ([f64; 3], [f64; 3]) {
-    let (a, s) = (m.sigma_a_per_mm.value, m.sigma_s_reduced_per_mm.value);
-    let t = std::array::from_fn(|c| a[c] + s[c]);
-    (t, std::array::from_fn(|c| s[c] / t[c]))
-}
-
 /// Mitsuba 3: `roughdielectric` (GGX, α, int_ior η) around a `homogeneous` medium (σt, albedo,
 /// isotropic phase), on a sphere. Mitsuba has no units: the scene is in millimetres, so σt is
 /// per millimetre.
 fn mitsuba(m: &MediumJson, radius_mm: f64) -> String {
-    let (t, albedo) = extinction_and_albedo(m);
+    let (t, albedo) = m.extinction_and_albedo();
     let mut s = String::new();
     let _ = writeln!(s, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
     let _ = writeln!(

@@ -222,11 +222,10 @@ fn centre(l: &crate::solve::Loaded, s: &SphereData, fit_path: &Path) -> Result<V
 /// fit.json's medium as the path tracer takes it: σt = σa + σs′ and albedo σs′/σt (an
 /// isotropic phase function with the reduced coefficients: the similarity relation).
 pub fn rendered_medium(m: &MediumJson) -> RenderedMedium {
-    let sigma_t: [f64; 3] =
-        std::array::from_fn(|c| m.sigma_a_per_mm.value[c] + m.sigma_s_reduced_per_mm.value[c]);
+    let (sigma_t_per_mm, albedo) = m.extinction_and_albedo();
     RenderedMedium {
-        sigma_t_per_mm: sigma_t,
-        albedo: std::array::from_fn(|c| m.sigma_s_reduced_per_mm.value[c] / sigma_t[c]),
+        sigma_t_per_mm,
+        albedo,
         eta: m.eta.value,
         alpha: m.alpha,
         irradiance: m.irradiance.value,

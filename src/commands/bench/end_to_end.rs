@@ -20,9 +20,13 @@ pub(super) struct EndToEnd {
     /// The fit, the light's hold and the rest of the solve stage.
     pub solve_s: f64,
     pub jackknife_s: f64,
+    /// The medium fit (`--model medium`); `None` when it did not run.
+    pub medium_s: Option<f64>,
     pub total_s: f64,
-    /// The worst channel's σ0 error against the truth (%).
-    pub sigma0_error_pct: f64,
+    /// The error against the truth (%) and what it is of: the worst channel's σ0, or with the
+    /// medium, the worst of σa and σs′.
+    pub error_pct: f64,
+    pub error_unit: &'static str,
     /// The (first photo's) light against the truth (degrees).
     pub light_error_deg: f64,
 }
@@ -45,11 +49,13 @@ pub(super) fn solve_fresh(dir: &Path, sigma0: [f64; 3], light: Vector3<f64>) -> 
         detect_s: t.detect_s,
         solve_s: t.solve_s,
         jackknife_s: t.jackknife_s,
+        medium_s: None,
         total_s: t.total_s,
-        sigma0_error_pct: 100.0
+        error_pct: 100.0
             * (0..3)
                 .map(|c| (f.sigma0_mm[c] - sigma0[c]).abs() / sigma0[c])
                 .fold(0.0, f64::max),
+        error_unit: "σ0 %",
         light_error_deg: Vector3::from(f.light_direction).angle(&light).to_degrees(),
     })
 }
@@ -96,24 +102,10 @@ pub(super) fn per_image_session(
     truth.ok_or_else(|| Error::Argument("a per-image session needs one photo or more".into()))
 }
 
-/// `solve --model medium` on a fresh copy: its stages' seconds, and σa and σs′ against the truth.
-pub(super) struct MediumEndToEnd {
-    pub decode_s: f64,
-    pub detect_s: f64,
-    pub solve_s: f64,
-    pub jackknife_s: f64,
-    pub medium_s: f64,
-    pub total_s: f64,
-    /// The worst channel's error of σa and of σs′ (%), and the light's (degrees).
-    pub sigma_a_error_pct: f64,
-    pub sigma_s_error_pct: f64,
-    pub light_error_deg: f64,
-}
-
 /// `solve --model medium --irradiance <truth>` on `dir`, a fresh copy of the physically based
 /// session `src` (its photos, session.json, intrinsics.json and truth.json): what a user waits
 /// for, and the medium against the renders' truth.
-pub(super) fn medium_fresh(src: &Path, dir: &Path) -> Result<MediumEndToEnd> {
+pub(super) fn medium_fresh(src: &Path, dir: &Path) -> Result<EndToEnd> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     for entry in std::fs::read_dir(src).map_err(|e| Error::io(src, e))? {
         let path = entry.map_err(|e| Error::io(src, e))?.path();
@@ -142,19 +134,20 @@ pub(super) fn medium_fresh(src: &Path, dir: &Path) -> Result<MediumEndToEnd> {
                 .fold(0.0, f64::max)
     };
     let t = &f.timings;
-    Ok(MediumEndToEnd {
+    Ok(EndToEnd {
         decode_s: t.decode_s,
         detect_s: t.detect_s,
         solve_s: t.solve_s,
         jackknife_s: t.jackknife_s,
-        medium_s: t.medium_s,
+        medium_s: Some(t.medium_s),
         total_s: t.total_s,
-        sigma_a_error_pct: worst(&m.sigma_a_per_mm.value, &|c| {
+        error_pct: worst(&m.sigma_a_per_mm.value, &|c| {
             (1.0 - mat.albedo_rgb[c]) * mat.sigma_t_per_mm
-        }),
-        sigma_s_error_pct: worst(&m.sigma_s_reduced_per_mm.value, &|c| {
+        })
+        .max(worst(&m.sigma_s_reduced_per_mm.value, &|c| {
             mat.albedo_rgb[c] * mat.sigma_t_per_mm
-        }),
+        })),
+        error_unit: "σa, σs′ %",
         light_error_deg: Vector3::from(f.light_direction)
             .angle(&Vector3::from(truth.light.direction_to_light_camera_frame))
             .to_degrees(),

@@ -329,31 +329,7 @@ fn medium_rows(opts: &BenchOptions) -> Result<Vec<Row>> {
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     mark_dir(&dir)?;
     let e = end_to_end::medium_fresh(src, &dir)?;
-    let stages = EndToEnd {
-        decode_s: e.decode_s,
-        detect_s: e.detect_s,
-        solve_s: e.solve_s,
-        jackknife_s: e.jackknife_s,
-        total_s: e.total_s,
-        sigma0_error_pct: f64::NAN,
-        light_error_deg: e.light_error_deg,
-    };
-    let mut rows = end_to_end_rows(MEDIUM_NAME, &stages);
-    let total = rows.pop().expect("the total's row");
-    rows.push(Row {
-        setting: "medium fit".into(),
-        seconds: e.medium_s,
-        error: None,
-        error_unit: String::new(),
-        light_error_deg: None,
-        ..total.clone()
-    });
-    rows.push(Row {
-        error: Some(e.sigma_a_error_pct.max(e.sigma_s_error_pct)),
-        error_unit: "σa, σs′ %".into(),
-        ..total
-    });
-    Ok(rows)
+    Ok(end_to_end_rows(MEDIUM_NAME, &e))
 }
 
 /// The stages of one end-to-end solve as rows (stage "end to end"), each with the decoding of
@@ -370,17 +346,19 @@ fn end_to_end_rows(name: &str, e: &EndToEnd) -> Vec<Row> {
         decode_s: Some(e.decode_s),
         observations: None,
     };
-    vec![
+    let mut rows = vec![
         row("detection", e.detect_s),
         row("fit and light hold", e.solve_s),
         row("jackknife", e.jackknife_s),
-        Row {
-            error: Some(e.sigma0_error_pct),
-            error_unit: "σ0 %".into(),
-            light_error_deg: Some(e.light_error_deg),
-            ..row("total", e.total_s)
-        },
-    ]
+    ];
+    rows.extend(e.medium_s.map(|s| row("medium fit", s)));
+    rows.push(Row {
+        error: Some(e.error_pct),
+        error_unit: e.error_unit.into(),
+        light_error_deg: Some(e.light_error_deg),
+        ..row("total", e.total_s)
+    });
+    rows
 }
 
 /// The solver's kernel on a session's pixels (every one, at its fit): the model, its gradient
@@ -711,8 +689,10 @@ mod tests {
             detect_s: 1.0,
             solve_s: 2.5,
             jackknife_s: 0.5,
+            medium_s: None,
             total_s: 4.25,
-            sigma0_error_pct: 1.0,
+            error_pct: 1.0,
+            error_unit: "σ0 %",
             light_error_deg: 0.1,
         };
         let r = BenchReport {
