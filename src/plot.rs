@@ -464,6 +464,25 @@ impl Plot {
 }
 
 impl Figure {
+    /// Panels in rows of `cols` (each of relative width 1), the last row filled out with empty
+    /// places.
+    pub fn grid(panels: Vec<Plot>, cols: usize) -> Vec<Vec<(Option<Plot>, f64)>> {
+        let cols = cols.max(1);
+        let mut rows: Vec<Vec<(Option<Plot>, f64)>> = vec![];
+        for (k, p) in panels.into_iter().enumerate() {
+            if k % cols == 0 {
+                rows.push(vec![]);
+            }
+            rows.last_mut().expect("a row").push((Some(p), 1.0));
+        }
+        if let Some(last) = rows.last_mut() {
+            while last.len() < cols {
+                last.push((None, 1.0));
+            }
+        }
+        rows
+    }
+
     /// Every legend entry: the figure's, then the panels' labelled layers (first of each label).
     fn keys(&self) -> Vec<(Swatch, String)> {
         let mut keys = self.legend.clone();

@@ -344,7 +344,7 @@ fn residual_against(groups: &[Group], axis: Axis) -> Figure {
     } else {
         groups.len().clamp(1, 3)
     };
-    let mut rows = vec![];
+    let mut panels = vec![];
     for (k, g) in groups.iter().enumerate() {
         let (x, r) = &series[k];
         let mut p = Plot::new(
@@ -383,16 +383,9 @@ fn residual_against(groups: &[Group], axis: Axis) -> Figure {
                 label: Some(format!("{} channel, running median (3°)", CHANNELS[c])),
             });
         }
-        if k % cols == 0 {
-            rows.push(vec![]);
-        }
-        rows.last_mut().unwrap().push((Some(p), 1.0));
+        panels.push(p);
     }
-    if let Some(last) = rows.last_mut() {
-        while last.len() < cols {
-            last.push((None, 1.0));
-        }
-    }
+    let rows = Figure::grid(panels, cols);
     let n_rows = rows.len() as u32;
     Figure {
         title: format!("Residual against {name} per radius (positive: the data are brighter)"),

@@ -466,7 +466,7 @@ fn write(json: &CloseLoopJson, dir: &Path) -> Result<Vec<PathBuf>> {
 /// each channel's peak, for the render, the medium model and the CDRF.
 pub fn figure(json: &CloseLoopJson) -> Figure {
     let cols = json.radii.len().clamp(1, 2);
-    let mut rows: Vec<Vec<(Option<Plot>, f64)>> = vec![];
+    let mut panels = vec![];
     for (k, r) in json.radii.iter().enumerate() {
         let wave = |pred: fn(&Band) -> [f64; 3]| -> Vec<(f64, f64)> {
             r.bands
@@ -528,16 +528,9 @@ pub fn figure(json: &CloseLoopJson) -> Figure {
                 label: Some(label.into()),
             });
         }
-        if k % cols == 0 {
-            rows.push(vec![]);
-        }
-        rows.last_mut().expect("a row").push((Some(p), 1.0));
+        panels.push(p);
     }
-    if let Some(last) = rows.last_mut() {
-        while last.len() < cols {
-            last.push((None, 1.0));
-        }
-    }
+    let rows = Figure::grid(panels, cols);
     let n_rows = rows.len() as u32;
     Figure {
         title: format!(
