@@ -224,6 +224,13 @@ pub struct ValueJson {
     pub std: f64,
 }
 
+/// Where the medium's η came from (`MediumJson::eta_sources`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EtaSourcesJson {
+    pub joint: ValueJson,
+    pub pixels: ValueJson,
+}
+
 /// The medium fit: the material as a path tracer takes it (isotropic phase function, so σs′ is
 /// σs), with each quantity's stated error.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -236,6 +243,10 @@ pub struct MediumJson {
     pub sigma_a_per_mm: PerChannelJson,
     pub sigma_s_reduced_per_mm: PerChannelJson,
     pub eta: ValueJson,
+    /// η's two sources, whose inverse-variance mean `eta` is: the joint fit's (its std with the
+    /// joint fit's own error) and the medium's pixels' (with the model's own error).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eta_sources: Option<EtaSourcesJson>,
     /// The transport mean free path 1/(σa + σs′).
     pub mean_free_path_mm: PerChannelJson,
     /// The surface's diffuse albedo an artist sets: the classical dipole's total diffuse

@@ -16,5 +16,6 @@ pub mod specular;
 pub mod sphere_diffusion;
 pub mod sphere_profile;
 pub mod table;
+pub mod tangential_flux;
 
 pub use radiance::*;

@@ -356,25 +356,52 @@ impl BeamLanes {
     }
 }
 
-/// M(θ) every half degree, interpolated linearly in θ ([`SphereDiffusion::tabulate`]).
+/// M(θ) every half degree, interpolated linearly in θ ([`SphereDiffusion::tabulate`]), with
+/// d ln M/dθ at the same nodes.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Tabulated(Vec<f64>);
+pub struct Tabulated {
+    m: Vec<f64>,
+    log_slope: Vec<f64>,
+}
 
 impl Tabulated {
     /// Any M(θ), given as a function of cos θ, every half degree.
     pub fn from_fn(m_of: impl Fn(f64) -> f64) -> Tabulated {
-        Tabulated(
-            (0..=360)
-                .map(|k| m_of((k as f64 * 0.5).to_radians().cos()))
-                .collect(),
-        )
+        let m: Vec<f64> = (0..=360)
+            .map(|k| m_of((k as f64 * 0.5).to_radians().cos()))
+            .collect();
+        // Central differences of ln M at the nodes (one-sided at 180°, 0 at the pole by symmetry).
+        let ln = |k: usize| m[k].max(1e-300).ln();
+        let h = 0.5f64.to_radians();
+        let log_slope = (0..=360)
+            .map(|k| match k {
+                0 => 0.0,
+                360 => (ln(360) - ln(359)) / h,
+                _ => (ln(k + 1) - ln(k - 1)) / (2.0 * h),
+            })
+            .collect();
+        Tabulated { m, log_slope }
     }
 
     /// M at cos θ.
     pub fn at(&self, cos_theta: f64) -> f64 {
+        Self::lerp(&self.m, cos_theta)
+    }
+
+    /// d ln M/dθ (per radian) at cos θ, interpolated linearly between the nodes.
+    pub fn log_slope(&self, cos_theta: f64) -> f64 {
+        Self::lerp(&self.log_slope, cos_theta)
+    }
+
+    fn lerp(nodes: &[f64], cos_theta: f64) -> f64 {
+        let (i, f) = Self::node(cos_theta);
+        nodes[i] * (1.0 - f) + nodes[i + 1] * f
+    }
+
+    /// The node below cos θ's angle and the fraction of the way to the next.
+    fn node(cos_theta: f64) -> (usize, f64) {
         let k = cos_theta.clamp(-1.0, 1.0).acos().to_degrees() * 2.0;
-        let (i, f) = ((k.floor() as usize).min(359), k - k.floor());
-        self.0[i] * (1.0 - f) + self.0[i + 1] * f
+        ((k.floor() as usize).min(359), k - k.floor().min(359.0))
     }
 }
 

@@ -8,7 +8,9 @@ use super::outcome::Outcome;
 use crate::error::{Error, Result};
 use crate::fit::medium::{self, MediumFit, Radius, Setup, MODEL_ERROR};
 use crate::fit::observe::SphereData;
-use crate::formats::fit::{MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson};
+use crate::formats::fit::{
+    EtaSourcesJson, MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson,
+};
 use crate::model::idx;
 
 /// The profile's name in fit.json.
@@ -137,12 +139,21 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     if !f.converged {
         notes.push("medium: the fit did not converge; its values are where it stopped".into());
     }
+    let ((j, js), (p, ps)) = (f.eta_sources.joint, f.eta_sources.pixels);
+    let (eta, eta_std) = f.derived().eta;
+    notes.push(format!(
+        "medium: η {eta:.3} ± {eta_std:.3} combines the joint fit's {j:.3} ± {js:.3} and the medium's pixels' {p:.3} ± {ps:.3} (their errors include each one's own error on physically based renders; docs/medium.md)"
+    ));
     if f.radii.len() < 3 {
         notes.push(format!(
             "medium: {} radius(es), too few for the jackknife: the errors are formal only",
             f.radii.len()
         ));
     }
+}
+
+fn value((value, std): (f64, f64)) -> ValueJson {
+    ValueJson { value, std }
 }
 
 /// fit.json's medium; `given_by` says where a given irradiance came from.
@@ -161,6 +172,10 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             value: d.eta.0,
             std: d.eta.1,
         },
+        eta_sources: Some(EtaSourcesJson {
+            joint: value(f.eta_sources.joint),
+            pixels: value(f.eta_sources.pixels),
+        }),
         mean_free_path_mm: per(d.mean_free_path),
         diffuse_albedo: per(d.diffuse_albedo),
         irradiance: per(d.irradiance),
@@ -170,7 +185,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             "fitted with the medium (no --irradiance)".into()
         },
         std_source: format!(
-            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, η {}) in quadrature",
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′",
             if f.std_jackknife.is_some() {
                 "larger of formal and jackknife"
             } else {

@@ -260,12 +260,13 @@ fn rows(
             .iter()
             .map(|&i| {
                 let g = &s.obs[i].geometry;
-                Px {
-                    cos_theta: g.normal.dot(&light),
-                    cos_phi: g.normal.dot(&g.view),
-                    radiance: s.obs[i].radiance[c],
-                    weight: s.obs[i].weight[c],
-                }
+                Px::at(
+                    &g.normal,
+                    &g.view,
+                    &light,
+                    s.obs[i].radiance[c],
+                    s.obs[i].weight[c],
+                )
             })
             .collect()
     };

@@ -60,6 +60,9 @@ pub struct Tally {
     batches: Vec<Vec<f64>>,
     /// Σw of photons that scattered exactly once, per θ bin.
     pub single: Vec<f64>,
+    /// Σw cos ψ per (θ bin, μ bin): ψ the exit direction's azimuth around the normal from the
+    /// surface's direction away from the light (increasing θ).
+    azimuthal: Vec<f64>,
     /// Weight that entered the medium, and weight ended by `MAX_EVENTS`.
     pub entered: f64,
     pub lost: f64,
@@ -130,6 +133,22 @@ impl Tally {
             .collect()
     }
 
+    /// The radiance's first azimuthal harmonic over the θ bins [lo, hi): per μ bin, b with
+    /// L(μ, ψ) ∝ 1 + b cos ψ (b = 2⟨cos ψ⟩), ψ measured from the direction away from the light.
+    pub fn azimuthal(&self, lo: usize, hi: usize) -> Vec<f64> {
+        let total = self.sum(lo, hi);
+        (0..MU_BINS)
+            .map(|k| {
+                let m: f64 = (lo..hi).map(|t| self.azimuthal[t * MU_BINS + k]).sum();
+                if total[k] > 0.0 {
+                    2.0 * m / total[k]
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
     /// Σ over every bin: the weight that left, per photon (the sphere's albedo, specular lobe
     /// excluded, as a fraction of the light on its disc).
     pub fn left_fraction(&self) -> f64 {
@@ -151,12 +170,14 @@ fn mean_and_error(values: &[f64]) -> Estimate {
 /// a given `seed`.
 pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
     let per_batch = photons.div_ceil(BATCHES as u64);
-    let results: Vec<(Vec<f64>, Vec<f64>, f64, f64)> = (0..BATCHES)
+    type Batch = (Vec<f64>, Vec<f64>, Vec<f64>, f64, f64);
+    let results: Vec<Batch> = (0..BATCHES)
         .into_par_iter()
         .map(|b| {
             let mut rng = super::row_rng(seed, 0x7a11, b as u64);
             let mut bins = vec![0.0; THETA_BINS * MU_BINS];
             let mut single = vec![0.0; THETA_BINS];
+            let mut azimuthal = vec![0.0; THETA_BINS * MU_BINS];
             let (mut entered, mut lost) = (0.0, 0.0);
             for _ in 0..per_batch {
                 let Some(walk) = walk(scene, &mut rng) else {
@@ -165,22 +186,25 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
                 entered += walk.entered;
                 match walk.exit {
                     None => lost += walk.lost,
-                    Some((theta_bin, mu_bin, events)) => {
+                    Some((theta_bin, mu_bin, events, cos_psi)) => {
                         bins[theta_bin * MU_BINS + mu_bin] += walk.left;
+                        azimuthal[theta_bin * MU_BINS + mu_bin] += walk.left * cos_psi;
                         if events == 1 {
                             single[theta_bin] += walk.left;
                         }
                     }
                 }
             }
-            (bins, single, entered, lost)
+            (bins, single, azimuthal, entered, lost)
         })
         .collect();
     let mut single = vec![0.0; THETA_BINS];
+    let mut azimuthal = vec![0.0; THETA_BINS * MU_BINS];
     let (mut entered, mut lost) = (0.0, 0.0);
     let mut batches = Vec::with_capacity(BATCHES);
-    for (bins, s, e, l) in results {
+    for (bins, s, z, e, l) in results {
         single.iter_mut().zip(&s).for_each(|(a, b)| *a += b);
+        azimuthal.iter_mut().zip(&z).for_each(|(a, b)| *a += b);
         entered += e;
         lost += l;
         batches.push(bins);
@@ -189,27 +213,35 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
         photons: per_batch * BATCHES as u64,
         batches,
         single,
+        azimuthal,
         entered,
         lost,
     }
 }
 
 /// One photon's fate: the weight it entered with, and where it left (θ bin, μ bin, scattering
-/// events) with the weight `left`, or None when absorbed (`lost` > 0 when ended by
+/// events, cos ψ of its direction's azimuth) with the weight `left`, or None when absorbed (`lost` > 0 when ended by
 /// `MAX_EVENTS` instead).
 struct Walk {
     entered: f64,
-    exit: Option<(usize, usize, u32)>,
+    exit: Option<(usize, usize, u32, f64)>,
     lost: f64,
     left: f64,
 }
 
-/// What the boundary does to a photon reaching it from inside: it leaves with outside cosine
-/// μ, or is reflected along d, its weight times `factor`; or the rough boundary ends it (its
+/// What the boundary does to a photon reaching it from inside: it leaves along `dir` (outside
+/// cosine μ), or is reflected along d, its weight times `factor`; or the rough boundary ends it (its
 /// microfacets shadow the drawn direction).
 enum AtWall {
-    Leaves { mu: f64, factor: f64 },
-    Reflected { d: Vector3<f64>, factor: f64 },
+    Leaves {
+        mu: f64,
+        dir: Vector3<f64>,
+        factor: f64,
+    },
+    Reflected {
+        d: Vector3<f64>,
+        factor: f64,
+    },
     Ended,
 }
 
@@ -261,11 +293,12 @@ fn walk(scene: &TallyScene, rng: &mut ChaCha8Rng) -> Option<Walk> {
                 weight *= factor;
                 d = along;
             }
-            AtWall::Leaves { mu, factor } => {
+            AtWall::Leaves { mu, dir, factor } => {
                 let theta = nx.z.clamp(-1.0, 1.0).acos().to_degrees();
                 let tb = ((theta / Tally::bin_width()) as usize).min(THETA_BINS - 1);
                 let mb = ((mu * MU_BINS as f64) as usize).min(MU_BINS - 1);
-                return ended(Some((tb, mb, events)), 0.0, weight * factor);
+                let cos_psi = away_from_light(&nx, &dir);
+                return ended(Some((tb, mb, events, cos_psi)), 0.0, weight * factor);
             }
         }
     }
@@ -312,6 +345,7 @@ fn at_wall(
             (false, _) => AtWall::Ended,
             (true, true) => AtWall::Leaves {
                 mu: b.wi.dot(nx),
+                dir: b.wi,
                 factor: b.weight / (scene.eta * scene.eta),
             },
             (true, false) => AtWall::Reflected {
@@ -328,9 +362,26 @@ fn at_wall(
         };
     }
     let sin_out2 = scene.eta * scene.eta * (1.0 - cos_in * cos_in);
+    let mu = (1.0 - sin_out2).max(0.0).sqrt();
     AtWall::Leaves {
-        mu: (1.0 - sin_out2).max(0.0).sqrt(),
+        mu,
+        // Snell: the tangential part scales by η.
+        dir: (d - nx * cos_in) * scene.eta + nx * mu,
         factor: 1.0,
+    }
+}
+
+/// cos ψ: the azimuth around the outward normal `n` of the direction `w`, from the surface's
+/// direction away from the light ẑ (that of increasing θ, (n cos θ − ẑ)/sin θ); 0 at the pole
+/// or along the normal.
+fn away_from_light(n: &Vector3<f64>, w: &Vector3<f64>) -> f64 {
+    let away = n * n.z - Vector3::z();
+    let along = w - n * n.dot(w);
+    let norms = away.norm() * along.norm();
+    if norms < 1e-12 {
+        0.0
+    } else {
+        away.dot(&along) / norms
     }
 }
 

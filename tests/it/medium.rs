@@ -871,17 +871,18 @@ fn medium_solve(
 }
 
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
-/// out: measured (2026-12-04) η 1.4018 against 1.4; σa +5.6, +4.9, +4.7%; σs′ +8.8, +7.9,
-/// +7.4%; residuals 0.92× the noise; the held-out sphere 4.21% by the medium, 7.60% by the CDRF
-/// on the same pixels. Asserted: η within 0.01, σa within 10%, σs′ within 14%, residuals below
-/// 1.1× the noise, and the medium's held-out error below the CDRF's. (Coverage is not asserted
-/// here: the stated errors' model term was set from this session and wax.)
+/// out: measured (2026-12-05) η 1.395 against 1.4; σa +1.5, 0.0, −1.0%; σs′ +0.8, −0.5, −1.7%;
+/// residuals 0.93× the noise; the held-out sphere 3.96% by the medium, 7.60% by the CDRF on the
+/// same pixels. (Before the flux along the surface and η's combination: η 1.402, σa +5 to +6%,
+/// σs′ +7 to +9%, held out 4.21%.) Asserted: η within 0.015, σa and σs′ within 5%, residuals
+/// below 1.1× the noise, the held-out error within 4.2% and below the CDRF's. (Coverage is not
+/// asserted here: the stated errors' model term was set from this session and wax.)
 #[test]
 fn the_medium_of_the_soap_renders() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
     let (dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
-    assert!((m.eta.value - 1.4).abs() < 0.01, "η {}", m.eta.value);
+    assert!((m.eta.value - 1.4).abs() < 0.015, "η {}", m.eta.value);
     for c in 0..3 {
         let (a, s) = (&m.sigma_a_per_mm, &m.sigma_s_reduced_per_mm);
         let ea = a.value[c] / t.media[c].sigma_a - 1.0;
@@ -891,7 +892,7 @@ fn the_medium_of_the_soap_renders() {
             100.0 * ea,
             100.0 * es
         );
-        assert!(ea.abs() < 0.10 && es.abs() < 0.14, "channel {c}: {ea} {es}");
+        assert!(ea.abs() < 0.05 && es.abs() < 0.05, "channel {c}: {ea} {es}");
     }
     assert!(m.residual_over_noise < 1.1, "{}", m.residual_over_noise);
     let h = m.holdout.expect("the held-out radius");
@@ -899,7 +900,10 @@ fn the_medium_of_the_soap_renders() {
         "held out: medium {:.4}, CDRF {:.4}",
         h.medium_rel_rmse, h.cdrf_rel_rmse
     );
-    assert!(h.medium_rel_rmse < h.cdrf_rel_rmse, "{h:?}");
+    assert!(
+        h.medium_rel_rmse < 0.042 && h.medium_rel_rmse < h.cdrf_rel_rmse,
+        "{h:?}"
+    );
     exports_read_back(&dir.path().join("fit.json"), m);
     the_loop_closes(&dir.path().join("fit.json"), m);
 }
@@ -1267,4 +1271,125 @@ fn rough_level_against_the_photon_tally() {
         worst(c.as_slice()),
         worst(&workbench::model::boundary::ROUGH_LEVEL)
     );
+}
+
+/// The tally's first azimuthal harmonic b (L ∝ 1 + b cos ψ, ψ from the direction away from the
+/// light) in a band of θ and a bin of μ, and P1's, a(θ) sin θᵢ with a = −(1/σt′R) d ln M/dθ
+/// from the model's M, averaged over the band by exitance (as the tally's ratio of sums is).
+fn flux_harmonics(
+    t: &workbench::synth::photon_tally::Tally,
+    model: &SphereDiffusion,
+    sigma_t_radius: f64,
+    eta: f64,
+    (lo, hi): (usize, usize),
+) -> Vec<(f64, f64, f64)> {
+    let table = model.tabulate();
+    let (mut sum_m, mut sum_ma) = (0.0, 0.0);
+    for k in 0..4 * (hi - lo) {
+        let th = (lo as f64 + (k as f64 + 0.5) / 4.0).to_radians();
+        let m = table.at(th.cos()) * th.sin();
+        sum_m += m;
+        sum_ma += m * -table.log_slope(th.cos()) / sigma_t_radius;
+    }
+    let a = sum_ma / sum_m;
+    let counts = t.angular(lo, hi);
+    t.azimuthal(lo, hi)
+        .iter()
+        .enumerate()
+        .skip(3)
+        .map(|(k, b)| {
+            let mu = (k as f64 + 0.5) / 10.0;
+            (*b, a * (1.0 - mu * mu).sqrt() / eta, counts[k])
+        })
+        .collect()
+}
+
+/// The bands of θ the flux along the surface is compared in (degrees).
+const FLUX_BANDS: [(usize, usize); 5] = [(20, 40), (40, 60), (60, 75), (75, 85), (85, 95)];
+
+/// The flux along the surface, run by hand (about 2 min): the photon tally's first azimuthal
+/// harmonic against P1's over 58 spheres (radius 15 and 35 mm, σt 0.5–2, albedo 0.9–0.995,
+/// η 1.4 and 1.6, GGX α 0.05 and 0.15), θ 20–95°, μ 0.3–1 (what a camera within φ 75° sees);
+/// the least-squares factor over P1, c₀ + c₁ s with s = √(1 − α′), which
+/// `model::tangential_flux::TANGENTIAL_FLUX` holds.
+#[test]
+#[ignore = "by hand: cargo test --release --test it -- --ignored medium::tangential_flux_against_the_photon_tally --nocapture"]
+fn tangential_flux_against_the_photon_tally() {
+    use nalgebra::{Matrix2, Vector2};
+    use workbench::model::tangential_flux::{coefficient, TANGENTIAL_FLUX};
+    // Per bin: the tally's harmonic, P1's, √(1 − α′), the bin's weight.
+    let mut rows = vec![];
+    for radius in [15.0, 35.0] {
+        for sigma_t in [0.5, 1.0, 2.0] {
+            for albedo in [0.9, 0.97, 0.995] {
+                for (eta, alpha) in [(1.4, 0.05), (1.4, 0.15), (1.6, 0.05), (1.6, 0.15)] {
+                    if albedo == 0.995 && sigma_t == 0.5 && alpha == 0.05 {
+                        continue;
+                    }
+                    let t = tally((radius, sigma_t, albedo, eta, alpha), 1_000_000, 23);
+                    let m = Medium::isotropic(sigma_t, albedo, eta);
+                    let model = SphereDiffusion::through(&m, radius, &Boundary::rough(eta, alpha));
+                    let s = (1.0 - m.reduced_albedo()).sqrt();
+                    for band in FLUX_BANDS {
+                        for (b, p, w) in flux_harmonics(&t, &model, sigma_t * radius, eta, band) {
+                            rows.push((b, p, s, w));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let (mut a, mut y) = (Matrix2::zeros(), Vector2::zeros());
+    for &(b, p, s, w) in &rows {
+        let x = Vector2::new(p, p * s);
+        a += w * x * x.transpose();
+        y += w * b * x;
+    }
+    let c = a.lu().solve(&y).unwrap();
+    let unexplained = |k: &dyn Fn(f64) -> f64| {
+        let (res, tot) = rows.iter().fold((0.0, 0.0), |(r, t), &(b, p, s, w)| {
+            (r + w * (b - k(s) * p).powi(2), t + w * b * b)
+        });
+        res / tot
+    };
+    println!(
+        "TANGENTIAL_FLUX = [{:.3}, {:.3}] (committed {TANGENTIAL_FLUX:?}); the harmonic's share unexplained: P1 {:.3}, fitted {:.3}, committed {:.3}",
+        c[0],
+        c[1],
+        unexplained(&|_| 1.0),
+        unexplained(&|s| c[0] + c[1] * s),
+        unexplained(&|s| coefficient(1.0 - s * s)),
+    );
+}
+
+/// The flux along the surface against the photon tally, on a wax-like 15 mm sphere (σt 1,
+/// albedo 0.92, η 1.44, GGX α 0.15, 2 million photons): the tally's first azimuthal harmonic
+/// over the model's, k(α′) · P1 (`model::tangential_flux`), weighted over μ 0.3–1 per band of θ.
+/// Measured (2026-12-05): 1.01 at 40–60°, 0.94 at 60–75°, 0.93 at 75–85°, 1.03 at 85–95°, with
+/// the harmonic itself 0.03, 0.06, 0.12 and 0.24 (at 85–95° the exit toward the dark side is
+/// 1.6 times that toward the lit one). Asserted: 0.8–1.2 in every band, and the harmonic at
+/// 75–85° above 0.08 (the separable law's 0 is refuted: its sampling error is about 0.005).
+#[test]
+fn the_exit_follows_the_flux_along_the_surface() {
+    let (radius, sigma_t, albedo, eta, alpha) = (15.0, 1.0, 0.92, 1.44, 0.15);
+    let t = tally((radius, sigma_t, albedo, eta, alpha), 2_000_000, 31);
+    let m = Medium::isotropic(sigma_t, albedo, eta);
+    let model = SphereDiffusion::through(&m, radius, &Boundary::rough(eta, alpha));
+    let k = workbench::model::tangential_flux::coefficient(m.reduced_albedo());
+    for band in FLUX_BANDS.iter().skip(1) {
+        let rows = flux_harmonics(&t, &model, sigma_t * radius, eta, *band);
+        let (bp, pp, w) = rows.iter().fold((0.0, 0.0, 0.0), |(a, b, c), &(bt, p, w)| {
+            (a + w * bt * k * p, b + w * (k * p).powi(2), c + w)
+        });
+        let mean_b = rows.iter().map(|&(b, _, w)| w * b).sum::<f64>() / w;
+        let ratio = bp / pp;
+        println!(
+            "θ {:?}: tally over model {ratio:.3}, harmonic {mean_b:.3}",
+            band
+        );
+        assert!((0.8..1.2).contains(&ratio), "θ {band:?}: {ratio}");
+        if band.0 == 75 {
+            assert!(mean_b > 0.08, "{mean_b}");
+        }
+    }
 }

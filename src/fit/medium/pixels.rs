@@ -22,12 +22,32 @@ pub struct Setup {
 /// One pixel and channel: where it lies and what it saw.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Px {
-    /// n·l and n·v.
+    /// n·l, n·v and l·v.
     pub cos_theta: f64,
     pub cos_phi: f64,
+    pub cos_light_view: f64,
     pub radiance: f64,
     /// 1/σ of its noise.
     pub weight: f64,
+}
+
+impl Px {
+    /// The pixel of normal `n` seen along `v` (toward the camera) under the light `light`.
+    pub fn at(
+        n: &Vector3<f64>,
+        v: &Vector3<f64>,
+        light: &Vector3<f64>,
+        radiance: f64,
+        weight: f64,
+    ) -> Px {
+        Px {
+            cos_theta: n.dot(light),
+            cos_phi: n.dot(v),
+            cos_light_view: light.dot(v),
+            radiance,
+            weight,
+        }
+    }
 }
 
 /// Every sphere of one radius: its pixels per channel.
@@ -68,12 +88,7 @@ pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
             }
             for c in 0..3 {
                 if o.weight[c] > 0.0 {
-                    radii[at].pixels[c].push(Px {
-                        cos_theta: n.dot(light),
-                        cos_phi: n.dot(&v),
-                        radiance: o.radiance[c],
-                        weight: o.weight[c],
-                    });
+                    radii[at].pixels[c].push(Px::at(&n, &v, light, o.radiance[c], o.weight[c]));
                 }
             }
         }

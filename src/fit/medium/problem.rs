@@ -6,10 +6,11 @@
 //! reaches: a channel's σa and σs′ change only its own profiles (one per radius), η all of them,
 //! and E enters linearly (its column is −prediction/σ exactly).
 
-use super::pixels::{Radius, Setup};
+use super::pixels::{Px, Radius, Setup};
 use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
 use crate::model::sphere_diffusion::{SphereDiffusion, Tabulated};
+use crate::model::tangential_flux;
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
@@ -130,9 +131,26 @@ pub(super) fn profiles(radii: &[Radius], p: &Physical, channels: &[usize]) -> Pr
     out
 }
 
-/// The predicted radiance of one pixel: E · law(cos φ) · M(θ).
-pub(super) fn predicted(e: f64, law: f64, m: f64) -> f64 {
-    e * law * m
+/// The predicted radiance of one pixel: E · law(cos φ) · M(θ), times the exit's azimuthal
+/// factor from the flux along the surface ([`tangential_flux`]).
+pub(super) fn predicted(
+    e: f64,
+    medium: &Medium,
+    radius_mm: f64,
+    boundary: &Boundary,
+    table: &Tabulated,
+    px: &Px,
+) -> f64 {
+    let flux = tangential_flux::factor(
+        table.log_slope(px.cos_theta),
+        (medium.sigma_a + medium.sigma_s_reduced) * radius_mm,
+        tangential_flux::coefficient(medium.reduced_albedo()),
+        medium.eta,
+        px.cos_theta,
+        px.cos_phi,
+        px.cos_light_view,
+    );
+    e * boundary.exit_law(px.cos_phi) * table.at(px.cos_theta) * flux
 }
 
 /// The problem at one point u, with its profiles.
@@ -143,16 +161,25 @@ pub(super) struct Problem<'a> {
     pub(super) tables: Profiles,
     /// Profiles computed so far (the cost of the fit).
     pub(super) evaluations: AtomicUsize,
+    /// η is held by its prior (the second stage): the solver's Jacobian leaves η's pixel rows
+    /// out, since the prior's row outweighs them; [`Problem::jacobian_with`] still gives them.
+    pub(super) eta_held: bool,
 }
 
 impl<'a> Problem<'a> {
-    pub(super) fn new(radii: &'a [Radius], setup: &'a Setup, u: DVector<f64>) -> Problem<'a> {
+    pub(super) fn new(
+        radii: &'a [Radius],
+        setup: &'a Setup,
+        u: DVector<f64>,
+        eta_held: bool,
+    ) -> Problem<'a> {
         let mut p = Problem {
             radii,
             setup,
             u: u.clone(),
             tables: Vec::new(),
             evaluations: AtomicUsize::new(0),
+            eta_held,
         };
         p.set_params(&u);
         p
@@ -185,8 +212,11 @@ impl<'a> Problem<'a> {
             for (k, px) in radius.pixels[c].iter().enumerate() {
                 let pred = predicted(
                     p.irradiance[c],
-                    p.boundary.exit_law(px.cos_phi),
-                    t.at(px.cos_theta),
+                    &p.media[c],
+                    radius.radius_mm,
+                    &p.boundary,
+                    t,
+                    px,
                 );
                 out[at + k] = (px.radiance - pred) * px.weight;
             }
@@ -213,11 +243,18 @@ impl<'a> Problem<'a> {
         for c in 0..3 {
             self.channel_residuals(&p, tables, c, out.as_mut_slice());
         }
-        let (mean, std) = self.setup.eta_prior;
         let at = self.pixel_rows();
-        out[at] = (p.media[0].eta - mean) / std;
-        out[at + 1] = WALL * outside(u.as_slice(), self.setup);
+        let prior = self.prior_rows(u);
+        out[at] = prior[0];
+        out[at + 1] = prior[1];
         out
+    }
+
+    /// The rows after the pixels': η's prior and the range's wall.
+    fn prior_rows(&self, u: &DVector<f64>) -> [f64; 2] {
+        let eta = physical(u.as_slice(), self.setup).media[0].eta;
+        let (mean, std) = self.setup.eta_prior;
+        [(eta - mean) / std, WALL * outside(u.as_slice(), self.setup)]
     }
 }
 
@@ -243,6 +280,14 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.jacobian_with(!self.eta_held)
+    }
+}
+
+impl Problem<'_> {
+    /// The Jacobian; without `eta_pixels`, η's column holds only its prior's row (the pixels'
+    /// rows 0, no profile computed for it).
+    pub(super) fn jacobian_with(&self, eta_pixels: bool) -> Option<DMatrix<f64>> {
         let base = self.all_residuals(&self.u, &self.tables);
         let mut jac = DMatrix::zeros(self.rows(), self.u.len());
         // A channel's σa and σs′: only its own rows and profiles move, η and the boundary stay.
@@ -261,14 +306,21 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
                 }
             }
         }
-        // η: every profile, the boundary and the prior.
+        // η: every profile, the boundary and the prior; or the prior alone.
         let mut u = self.u.clone();
         u[ETA] += STEP;
-        let p = physical(u.as_slice(), self.setup);
-        let tables = profiles(self.radii, &p, &[0, 1, 2]);
-        self.count(3);
-        let moved = self.all_residuals(&u, &tables);
-        jac.set_column(ETA, &((moved - &base) / STEP));
+        if eta_pixels {
+            let p = physical(u.as_slice(), self.setup);
+            let tables = profiles(self.radii, &p, &[0, 1, 2]);
+            self.count(3);
+            let moved = self.all_residuals(&u, &tables);
+            jac.set_column(ETA, &((moved - &base) / STEP));
+        } else {
+            let at = self.pixel_rows();
+            let moved = self.prior_rows(&u);
+            jac[(at, ETA)] = (moved[0] - base[at]) / STEP;
+            jac[(at + 1, ETA)] = (moved[1] - base[at + 1]) / STEP;
+        }
         // The irradiance, linear: ∂r/∂ln E_c = −prediction/σ · σ = −(radiance·w − r).
         if self.setup.irradiance.is_none() {
             for c in 0..3 {
@@ -286,7 +338,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::pixels::{Px, Radius, Setup};
+    use super::super::pixels::{Radius, Setup};
     use super::*;
     use nalgebra::Vector3;
 
@@ -326,15 +378,25 @@ mod tests {
                         SphereDiffusion::through(&p.media[c], radius_mm, &p.boundary).tabulate();
                     (0..40)
                         .map(|k| {
-                            let cos_theta = (k as f64 * 3.0).to_radians().cos();
-                            let cos_phi = 0.3 + 0.0175 * k as f64;
-                            let l =
-                                p.irradiance[c] * p.boundary.exit_law(cos_phi) * t.at(cos_theta);
+                            let at = Px {
+                                cos_theta: (k as f64 * 3.0).to_radians().cos(),
+                                cos_phi: 0.3 + 0.0175 * k as f64,
+                                cos_light_view: 0.5,
+                                radiance: 0.0,
+                                weight: 0.0,
+                            };
+                            let l = predicted(
+                                p.irradiance[c],
+                                &p.media[c],
+                                radius_mm,
+                                &p.boundary,
+                                &t,
+                                &at,
+                            );
                             Px {
-                                cos_theta,
-                                cos_phi,
                                 radiance: l * (1.0 + 0.02 * ((k * 7 % 5) as f64 - 2.0)),
                                 weight: 1.0 / (0.01 + 0.01 * l),
+                                ..at
                             }
                         })
                         .collect()
@@ -343,7 +405,7 @@ mod tests {
             })
             .collect();
         let at: Vec<f64> = truth.iter().map(|v| v + 0.05).collect();
-        let problem = Problem::new(&radii, &setup, DVector::from_vec(at.clone()));
+        let problem = Problem::new(&radii, &setup, DVector::from_vec(at.clone()), false);
         let jac = problem.jacobian().unwrap();
         let largest = jac.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let h = 1e-3;
@@ -351,7 +413,7 @@ mod tests {
             let moved = |d: f64| {
                 let mut u = at.clone();
                 u[k] += d;
-                Problem::new(&radii, &setup, DVector::from_vec(u))
+                Problem::new(&radii, &setup, DVector::from_vec(u), false)
                     .residuals()
                     .unwrap()
             };
