@@ -8,9 +8,11 @@
 //! −ln(u)/σt, isotropic scattering kept with probability α (analog absorption). At the boundary
 //! from inside it is reflected with Fresnel's probability (total internal reflection beyond the
 //! critical angle), otherwise it leaves, and its weight is tallied by the polar angle θ of the
-//! exit point from l and by the cosine μ of its outside direction with the normal. From the
-//! tally: the exitance per unit irradiance M(θ) (what leaves per unit area) and the radiance's
-//! angular law within a band of θ.
+//! exit point from l and by the cosine μ of its outside direction with the normal, and, times
+//! cos ψ, by the same bins (ψ the outside direction's azimuth from the surface's direction away
+//! from the light). From the tally: the exitance per unit irradiance M(θ) (what leaves per unit
+//! area), the radiance's angular law within a band of θ, and its first azimuthal harmonic (the
+//! flux along the surface, docs/medium.md).
 //!
 //! With a rough boundary (GGX roughness α > 0) each crossing or reflection is drawn from the
 //! renderer's own boundary ([`super::dielectric`], visible normals): a photon carries flux, so
