@@ -119,6 +119,27 @@ pub fn jackknife_widening(n: usize) -> f64 {
     t_quantile_central(TWO_SIGMA, n as u32 - 1) / 2.0
 }
 
+/// Inverse-variance weighted mean with its standard error, widened by √(χ²/dof) when > 1.
+pub(crate) fn inverse_variance_mean(values: &[(f64, f64)]) -> (f64, f64) {
+    let good: Vec<(f64, f64)> = values
+        .iter()
+        .cloned()
+        .filter(|(v, s)| v.is_finite() && s.is_finite() && *s > 0.0)
+        .collect();
+    if good.is_empty() {
+        return (f64::NAN, f64::INFINITY);
+    }
+    let w: f64 = good.iter().map(|(_, s)| 1.0 / (s * s)).sum();
+    let mean = good.iter().map(|(v, s)| v / (s * s)).sum::<f64>() / w;
+    let se = w.sqrt().recip();
+    if good.len() < 2 {
+        return (mean, se);
+    }
+    let chi2: f64 = good.iter().map(|(v, s)| ((v - mean) / s).powi(2)).sum();
+    let birge = (chi2 / (good.len() - 1) as f64).sqrt();
+    (mean, se * birge.max(1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -69,27 +69,6 @@ pub(crate) fn predicting_model() -> Model {
     }
 }
 
-/// Inverse-variance weighted mean with its standard error, widened by √(χ²/dof) when > 1.
-pub(crate) fn combine(values: &[(f64, f64)]) -> (f64, f64) {
-    let good: Vec<(f64, f64)> = values
-        .iter()
-        .cloned()
-        .filter(|(v, s)| v.is_finite() && s.is_finite() && *s > 0.0)
-        .collect();
-    if good.is_empty() {
-        return (f64::NAN, f64::INFINITY);
-    }
-    let w: f64 = good.iter().map(|(_, s)| 1.0 / (s * s)).sum();
-    let mean = good.iter().map(|(v, s)| v / (s * s)).sum::<f64>() / w;
-    let se = w.sqrt().recip();
-    if good.len() < 2 {
-        return (mean, se);
-    }
-    let chi2: f64 = good.iter().map(|(v, s)| ((v - mean) / s).powi(2)).sum();
-    let birge = (chi2 / (good.len() - 1) as f64).sqrt();
-    (mean, se * birge.max(1.0))
-}
-
 /// Run the baseline. `light` is required (the paper assumed it known).
 pub fn fit(
     spheres: &[&SphereData],
@@ -160,7 +139,7 @@ pub fn fit(
     let mut albedo = [0.0; 3];
     for c in 0..3 {
         let of = |f: &dyn Fn(&RadiusFit) -> (f64, f64)| {
-            combine(&per_radius.iter().map(f).collect::<Vec<_>>())
+            crate::stats::inverse_variance_mean(&per_radius.iter().map(f).collect::<Vec<_>>())
         };
         (sigma0[c], std[idx::SIGMA0 + c]) = of(&|r| (r.sigma0_mm[c], r.sigma0_std[c]));
         (albedo[c], std[idx::ALBEDO + c]) = of(&|r| (r.albedo[c], r.albedo_std[c]));

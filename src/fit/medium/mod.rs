@@ -162,8 +162,9 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 ///
 /// 1. σa, σs′ and η free, η's prior the joint fit's (`setup.eta_prior`);
 /// 2. η held at the inverse-variance mean of the joint fit's η and the first stage's, whose
-///    error is its statistical one and the model's own ([`MODEL_ERROR`]'s η) in quadrature,
-///    and σa, σs′ fitted again from the first stage's.
+///    error is its statistical one and the model's own ([`MODEL_ERROR`]'s η) in quadrature
+///    (its error widened by √χ² when the two disagree beyond their errors), and σa, σs′ fitted
+///    again from the first stage's.
 ///
 /// The pixels alone pull η by more than its statistical error says (0.04–0.10 low on the
 /// physically based wax and soap renders, where the joint fit's η is within 0.03), so their
@@ -186,7 +187,10 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
             .hypot(MODEL_ERROR.eta),
     );
     let joint = (setup.eta_prior.0, setup.eta_prior.1.hypot(JOINT_ETA_ERROR));
-    let eta = combine(joint, (eta_px, eta_px_std));
+    let eta = match crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]) {
+        (v, s) if v.is_finite() && s.is_finite() => (v, s),
+        _ => setup.eta_prior,
+    };
     let held_setup = Setup {
         eta_prior: (eta.0, HELD * eta.1),
         ..*setup
@@ -256,15 +260,6 @@ fn solve<'a>(
         .with_patience(30)
         .with_stepbound(1.0)
         .minimize(Problem::new(radii, setup, u, eta_held))
-}
-
-/// The inverse-variance mean of two estimates (value, std) and its std.
-fn combine(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
-    let (wa, wb) = (1.0 / (a.1 * a.1), 1.0 / (b.1 * b.1));
-    if !wa.is_finite() || !wb.is_finite() || wa + wb <= 0.0 {
-        return if a.1 <= b.1 { a } else { b };
-    }
-    ((a.0 * wa + b.0 * wb) / (wa + wb), (wa + wb).powf(-0.5))
 }
 
 /// The fitted medium's prediction of `radius`'s pixels, per channel (radiance units).
