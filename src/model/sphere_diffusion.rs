@@ -393,6 +393,13 @@ impl Tabulated {
         Self::lerp(&self.log_slope, cos_theta)
     }
 
+    /// M and d ln M/dθ at cos θ, the node found once (a pixel's prediction needs both).
+    pub fn at_with_log_slope(&self, cos_theta: f64) -> (f64, f64) {
+        let (i, f) = Self::node(cos_theta);
+        let lerp = |v: &[f64]| v[i] * (1.0 - f) + v[i + 1] * f;
+        (lerp(&self.m), lerp(&self.log_slope))
+    }
+
     fn lerp(nodes: &[f64], cos_theta: f64) -> f64 {
         let (i, f) = Self::node(cos_theta);
         nodes[i] * (1.0 - f) + nodes[i + 1] * f

@@ -8,6 +8,7 @@
 use nalgebra::Vector3;
 use std::path::Path;
 use workbench::error::{Error, Result};
+use workbench::formats::fit::FitFile;
 use workbench::formats::session::{LightMode, Session, SessionImage};
 use workbench::solve::{self, Options, SolveModel};
 use workbench::synth::session::{self, SessionConfig};
@@ -43,21 +44,37 @@ pub(super) fn solve_fresh(dir: &Path, sigma0: [f64; 3], light: Vector3<f64>) -> 
     let mut o = Options::new(dir);
     o.quiet = true;
     let f = solve::run(&o)?;
-    let t = &f.timings;
-    Ok(EndToEnd {
-        decode_s: t.decode_s,
-        detect_s: t.detect_s,
-        solve_s: t.solve_s,
-        jackknife_s: t.jackknife_s,
-        medium_s: None,
-        total_s: t.total_s,
-        error_pct: 100.0
-            * (0..3)
-                .map(|c| (f.sigma0_mm[c] - sigma0[c]).abs() / sigma0[c])
-                .fold(0.0, f64::max),
-        error_unit: "σ0 %",
-        light_error_deg: Vector3::from(f.light_direction).angle(&light).to_degrees(),
-    })
+    Ok(EndToEnd::of(
+        &f,
+        false,
+        (
+            100.0
+                * (0..3)
+                    .map(|c| (f.sigma0_mm[c] - sigma0[c]).abs() / sigma0[c])
+                    .fold(0.0, f64::max),
+            "σ0 %",
+        ),
+        &light,
+    ))
+}
+
+impl EndToEnd {
+    /// A solve's row from its fit.json: its stages' seconds (the medium stage's with `medium`),
+    /// `error` (value and unit) and its light against `light`, the truth.
+    fn of(f: &FitFile, medium: bool, error: (f64, &'static str), light: &Vector3<f64>) -> EndToEnd {
+        let t = &f.timings;
+        EndToEnd {
+            decode_s: t.decode_s,
+            detect_s: t.detect_s,
+            solve_s: t.solve_s,
+            jackknife_s: t.jackknife_s,
+            medium_s: medium.then_some(t.medium_s),
+            total_s: t.total_s,
+            error_pct: error.0,
+            error_unit: error.1,
+            light_error_deg: Vector3::from(f.light_direction).angle(light).to_degrees(),
+        }
+    }
 }
 
 /// A session of `n` photos of one 25 mm sphere that stays put, each under its own light
@@ -133,23 +150,16 @@ pub(super) fn medium_fresh(src: &Path, dir: &Path) -> Result<EndToEnd> {
                 .map(|c| (fitted[c] / truth(c) - 1.0).abs())
                 .fold(0.0, f64::max)
     };
-    let t = &f.timings;
-    Ok(EndToEnd {
-        decode_s: t.decode_s,
-        detect_s: t.detect_s,
-        solve_s: t.solve_s,
-        jackknife_s: t.jackknife_s,
-        medium_s: Some(t.medium_s),
-        total_s: t.total_s,
-        error_pct: worst(&m.sigma_a_per_mm.value, &|c| {
-            (1.0 - mat.albedo_rgb[c]) * mat.sigma_t_per_mm
-        })
-        .max(worst(&m.sigma_s_reduced_per_mm.value, &|c| {
-            mat.albedo_rgb[c] * mat.sigma_t_per_mm
-        })),
-        error_unit: "σa, σs′ %",
-        light_error_deg: Vector3::from(f.light_direction)
-            .angle(&Vector3::from(truth.light.direction_to_light_camera_frame))
-            .to_degrees(),
-    })
+    let sigma_a = worst(&m.sigma_a_per_mm.value, &|c| {
+        (1.0 - mat.albedo_rgb[c]) * mat.sigma_t_per_mm
+    });
+    let sigma_s = worst(&m.sigma_s_reduced_per_mm.value, &|c| {
+        mat.albedo_rgb[c] * mat.sigma_t_per_mm
+    });
+    Ok(EndToEnd::of(
+        &f,
+        true,
+        (sigma_a.max(sigma_s), "σa, σs′ %"),
+        &Vector3::from(truth.light.direction_to_light_camera_frame),
+    ))
 }

@@ -175,16 +175,11 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
     let t0 = Instant::now();
     let free = solve(radii, setup, DVector::from_column_slice(start), false);
     let free_errors = errors::of(&free.0, None);
+    // The pixels' η and its stated error (statistical and the model's own, as for any fit).
+    let eta_minus_one = free.0.u[ETA].exp();
     let (eta_px, eta_px_std) = (
-        1.0 + free.0.u[ETA].exp(),
-        (free.0.u[ETA].exp() * free_errors.std_formal[ETA])
-            .hypot(
-                free_errors
-                    .std_jackknife
-                    .as_ref()
-                    .map_or(0.0, |j| free.0.u[ETA].exp() * j[ETA]),
-            )
-            .hypot(MODEL_ERROR.eta),
+        1.0 + eta_minus_one,
+        eta_minus_one * free_errors.covariance[(ETA, ETA)].max(0.0).sqrt(),
     );
     let joint = (setup.eta_prior.0, setup.eta_prior.1.hypot(JOINT_ETA_ERROR));
     let eta = match crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]) {

@@ -141,8 +141,9 @@ pub(super) fn predicted(
     table: &Tabulated,
     px: &Px,
 ) -> f64 {
+    let (m, log_slope) = table.at_with_log_slope(px.cos_theta);
     let flux = tangential_flux::factor(
-        table.log_slope(px.cos_theta),
+        log_slope,
         (medium.sigma_a + medium.sigma_s_reduced) * radius_mm,
         tangential_flux::coefficient(medium.reduced_albedo()),
         medium.eta,
@@ -150,7 +151,7 @@ pub(super) fn predicted(
         px.cos_phi,
         px.cos_light_view,
     );
-    e * boundary.exit_law(px.cos_phi) * table.at(px.cos_theta) * flux
+    e * boundary.exit_law(px.cos_phi) * m * flux
 }
 
 /// The problem at one point u, with its profiles.
