@@ -13,6 +13,7 @@ pub mod mixture;
 pub mod quadrature;
 mod radiance;
 pub mod specular;
+pub mod sphere_atlas;
 pub mod sphere_diffusion;
 pub mod sphere_profile;
 pub mod table;

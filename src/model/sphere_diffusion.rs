@@ -383,6 +383,29 @@ impl Tabulated {
         Tabulated { m, log_slope }
     }
 
+    /// A table from its nodes' M and d ln M/dθ (every half degree from 0 to 180°).
+    pub fn from_values(m: Vec<f64>, log_slope: Vec<f64>) -> Tabulated {
+        assert!(m.len() == 361 && log_slope.len() == 361, "361 nodes");
+        Tabulated { m, log_slope }
+    }
+
+    /// The nodes' M and d ln M/dθ.
+    pub fn values(&self) -> (&[f64], &[f64]) {
+        (&self.m, &self.log_slope)
+    }
+
+    /// Where cos θ falls among the nodes, for [`Self::at_node`] (one table's node serves all
+    /// the tables of the same θ grid).
+    pub fn locate(cos_theta: f64) -> (usize, f64) {
+        Self::node(cos_theta)
+    }
+
+    /// M and d ln M/dθ at a place found by [`Self::locate`].
+    pub fn at_node(&self, (i, f): (usize, f64)) -> (f64, f64) {
+        let lerp = |v: &[f64]| v[i] * (1.0 - f) + v[i + 1] * f;
+        (lerp(&self.m), lerp(&self.log_slope))
+    }
+
     /// M at cos θ.
     pub fn at(&self, cos_theta: f64) -> f64 {
         Self::lerp(&self.m, cos_theta)
@@ -395,9 +418,7 @@ impl Tabulated {
 
     /// M and d ln M/dθ at cos θ, the node found once (a pixel's prediction needs both).
     pub fn at_with_log_slope(&self, cos_theta: f64) -> (f64, f64) {
-        let (i, f) = Self::node(cos_theta);
-        let lerp = |v: &[f64]| v[i] * (1.0 - f) + v[i + 1] * f;
-        (lerp(&self.m), lerp(&self.log_slope))
+        self.at_node(Self::node(cos_theta))
     }
 
     fn lerp(nodes: &[f64], cos_theta: f64) -> f64 {

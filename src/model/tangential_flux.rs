@@ -24,8 +24,27 @@ pub const TANGENTIAL_FLUX: [f64; 2] = [1.15, -1.0];
 /// [`TANGENTIAL_FLUX`]'s coefficient at reduced albedo α′ (√(1 − α′) held within the fitted
 /// range, 0.07–0.32).
 pub fn coefficient(reduced_albedo: f64) -> f64 {
-    let s = (1.0 - reduced_albedo).max(0.0).sqrt().clamp(0.07, 0.32);
-    TANGENTIAL_FLUX[0] + TANGENTIAL_FLUX[1] * s
+    coefficient_with_slope(reduced_albedo).0
+}
+
+/// [`coefficient`] and its derivative in ln(1 − α′) (0 where √(1 − α′) is held).
+pub fn coefficient_with_slope(reduced_albedo: f64) -> (f64, f64) {
+    let s = (1.0 - reduced_albedo).max(0.0).sqrt();
+    let held = s.clamp(0.07, 0.32);
+    let slope = if held == s { 0.5 * s } else { 0.0 };
+    (
+        TANGENTIAL_FLUX[0] + TANGENTIAL_FLUX[1] * held,
+        TANGENTIAL_FLUX[1] * slope,
+    )
+}
+
+/// The factor's derivatives: in the log-slope, in ln(σt′R), in the coefficient k and in η.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FactorGradient {
+    pub log_slope: f64,
+    pub ln_sigma_t_radius: f64,
+    pub k: f64,
+    pub eta: f64,
 }
 
 /// The exit radiance toward the camera over its average in azimuth: 1 + k a sin θᵢ cos ψ (k
@@ -46,13 +65,50 @@ pub fn factor(
     cos_phi: f64,
     cos_light_view: f64,
 ) -> f64 {
+    factor_with_gradient(
+        log_slope,
+        sigma_t_radius,
+        k,
+        eta,
+        cos_theta,
+        cos_phi,
+        cos_light_view,
+    )
+    .0
+}
+
+/// [`factor`] and its derivatives (0 where it, or sin θᵢ cos ψ, is held at its range's edge).
+pub fn factor_with_gradient(
+    log_slope: f64,
+    sigma_t_radius: f64,
+    k: f64,
+    eta: f64,
+    cos_theta: f64,
+    cos_phi: f64,
+    cos_light_view: f64,
+) -> (f64, FactorGradient) {
     let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
     if sin_theta < 1e-9 || sigma_t_radius <= 0.0 {
-        return 1.0;
+        return (1.0, FactorGradient::default());
     }
     let a = -log_slope / sigma_t_radius;
-    let along = ((cos_phi * cos_theta - cos_light_view) / (eta * sin_theta)).clamp(-1.0, 1.0);
-    (1.0 + k * a * along).clamp(0.05, 1.95)
+    let free = (cos_phi * cos_theta - cos_light_view) / (eta * sin_theta);
+    let along = free.clamp(-1.0, 1.0);
+    let f = 1.0 + k * a * along;
+    if !(0.05..=1.95).contains(&f) {
+        return (f.clamp(0.05, 1.95), FactorGradient::default());
+    }
+    let gradient = FactorGradient {
+        log_slope: -k * along / sigma_t_radius,
+        ln_sigma_t_radius: -k * a * along,
+        k: a * along,
+        eta: if free == along {
+            -k * a * along / eta
+        } else {
+            0.0
+        },
+    };
+    (f, gradient)
 }
 
 #[cfg(test)]
@@ -92,5 +148,34 @@ mod tests {
             let along = factor(-1.0, 1.0, 1.0, eta, ct, cp, l.dot(&v)) - 1.0;
             assert!((along - direct).abs() < 1e-12, "{along} against {direct}");
         }
+    }
+
+    /// The factor's and the coefficient's derivatives against central differences (step 1e-6,
+    /// relative 1e-7 measured; asserted 1e-6 of the largest).
+    #[test]
+    fn the_gradient_follows_central_differences() {
+        let (ls, str_, k, eta, ct, cp, lv) = (-2.0, 12.0, 0.9, 1.44, 0.3, 0.7, -0.1);
+        let (f, g) = factor_with_gradient(ls, str_, k, eta, ct, cp, lv);
+        let h = 1e-6;
+        let d = |m: &dyn Fn(f64) -> f64| (m(h) - m(-h)) / (2.0 * h);
+        let numeric = [
+            d(&|e| factor(ls + e, str_, k, eta, ct, cp, lv)),
+            d(&|e| factor(ls, str_ * e.exp(), k, eta, ct, cp, lv)),
+            d(&|e| factor(ls, str_, k + e, eta, ct, cp, lv)),
+            d(&|e| factor(ls, str_, k, eta + e, ct, cp, lv)),
+        ];
+        let analytic = [g.log_slope, g.ln_sigma_t_radius, g.k, g.eta];
+        assert!(f != 1.0 && analytic.iter().all(|v| v.abs() > 1e-3));
+        for (a, n) in analytic.iter().zip(numeric) {
+            assert!((a - n).abs() < 1e-6, "{a} against {n}");
+        }
+        let albedo = 0.97;
+        let (_, slope) = coefficient_with_slope(albedo);
+        let y = (1.0 - albedo).ln();
+        let n = d(&|e| coefficient(1.0 - (y + e).exp()));
+        assert!(
+            slope != 0.0 && (slope - n).abs() < 1e-7,
+            "{slope} against {n}"
+        );
     }
 }

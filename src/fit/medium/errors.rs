@@ -32,8 +32,6 @@ pub(super) struct Errors {
     pub(super) std_formal: Vec<f64>,
     pub(super) std_jackknife: Option<Vec<f64>>,
     pub(super) residual_over_noise: f64,
-    /// Profiles the Jacobian took.
-    pub(super) profiles: usize,
     /// d u/d ln(η − 1) of the other parameters with η moved and the pixels refitted (first
     /// order): zero at η's own index.
     pub(super) eta_sensitivity: DVector<f64>,
@@ -44,9 +42,6 @@ pub(super) struct Errors {
 /// sensitivity to η, −(J_fᵀJ_f)⁻¹J_fᵀ j_η over the pixels' rows (J_f the other columns).
 pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
     let n = problem.u.len();
-    let before = problem
-        .evaluations
-        .load(std::sync::atomic::Ordering::Relaxed);
     let (r, jac) = match (problem.residuals(), problem.jacobian_with(true)) {
         (Some(r), Some(j)) => (r, j),
         _ => {
@@ -55,17 +50,15 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
                 std_formal: vec![f64::NAN; n],
                 std_jackknife: None,
                 residual_over_noise: f64::NAN,
-                profiles: 0,
                 eta_sensitivity: DVector::zeros(n),
             }
         }
     };
-    let profiles = problem
-        .evaluations
-        .load(std::sync::atomic::Ordering::Relaxed)
-        - before;
     let sqrt = std_of;
     let m = problem.pixel_rows();
+    // The range's wall is no measurement: a parameter past its edge is not determined.
+    let mut jac = jac;
+    jac.row_mut(m + 1).fill(0.0);
     let pixels_ss: f64 = r.rows(0, m).iter().map(|v| v * v).sum();
     let residual_over_noise = (pixels_ss / m as f64).sqrt();
     let s2 = (pixels_ss / (m as f64 - n as f64).max(1.0)).max(1.0);
@@ -100,7 +93,6 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
         std_formal,
         std_jackknife,
         residual_over_noise,
-        profiles,
         eta_sensitivity,
     }
 }

@@ -21,6 +21,7 @@ mod pixels;
 mod problem;
 
 use crate::model::dipole::Medium;
+use crate::model::sphere_atlas::SphereAtlas;
 use levenberg_marquardt::LevenbergMarquardt;
 use nalgebra::{DMatrix, DVector};
 use problem::{physical, predicted, profiles, Problem, ETA};
@@ -173,7 +174,14 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 /// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit").
 pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
     let t0 = Instant::now();
-    let free = solve(radii, setup, DVector::from_column_slice(start), false);
+    let atlas = SphereAtlas::new(setup.alpha);
+    let free = solve(
+        radii,
+        setup,
+        &atlas,
+        DVector::from_column_slice(start),
+        false,
+    );
     let free_errors = errors::of(&free.0, None);
     // The pixels' η and its stated error (statistical and the model's own, as for any fit).
     let eta_minus_one = free.0.u[ETA].exp();
@@ -195,18 +203,10 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
     let step = (eta.0 - 1.0).ln() - u[ETA];
     u += &free_errors.eta_sensitivity * step;
     u[ETA] = (eta.0 - 1.0).ln();
-    let (problem, report) = solve(radii, &held_setup, u, true);
+    let (problem, report) = solve(radii, &held_setup, &atlas, u, true);
     let p = physical(problem.u.as_slice(), setup);
     let errors = errors::of(&problem, Some(eta.1));
-    let profiles = free
-        .0
-        .evaluations
-        .load(std::sync::atomic::Ordering::Relaxed)
-        + free_errors.profiles
-        + problem
-            .evaluations
-            .load(std::sync::atomic::Ordering::Relaxed)
-        + errors.profiles;
+    let profiles = atlas.computed();
     MediumFit {
         media: p.media,
         irradiance: p.irradiance,
@@ -246,6 +246,7 @@ const HELD: f64 = 1e-3;
 fn solve<'a>(
     radii: &'a [Radius],
     setup: &'a Setup,
+    atlas: &'a SphereAtlas,
     u: DVector<f64>,
     eta_held: bool,
 ) -> (Problem<'a>, levenberg_marquardt::MinimizationReport<f64>) {
@@ -254,7 +255,7 @@ fn solve<'a>(
         .with_xtol(1e-8)
         .with_patience(30)
         .with_stepbound(1.0)
-        .minimize(Problem::new(radii, setup, u, eta_held))
+        .minimize(Problem::new(radii, setup, atlas, u, eta_held))
 }
 
 /// The fitted medium's prediction of `radius`'s pixels, per channel (radiance units).
