@@ -201,3 +201,31 @@ fn jackknife(problem: &Problem, r: &DVector<f64>, jac: &DMatrix<f64>) -> Option<
             .collect(),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::sphere_atlas::SphereAtlas;
+
+    /// Two σs′ past their range's edge (held there by `physical`): their columns vanish and
+    /// the range's wall is no measurement, so they are not determined (NaN) and the others keep
+    /// finite errors. With the wall's row in the errors, its two equal columns made the normal
+    /// equations singular and every error NaN (jade-6 of `datasets/pbr-seeds`).
+    #[test]
+    fn a_parameter_past_its_edge_leaves_the_others_determined() {
+        let (setup, radii, truth) = super::super::problem::tests::fixture();
+        let mut u = truth.to_vec();
+        let edge = super::super::problem::sigma_s_range(setup.largest_radius)
+            .1
+            .ln();
+        u[3] = edge + 0.01;
+        u[5] = edge + 0.02;
+        let atlas = SphereAtlas::new(setup.alpha);
+        let problem = Problem::new(&radii, &setup, &atlas, DVector::from_vec(u), false);
+        let errors = of(&problem, None);
+        for (k, s) in errors.std_formal.iter().enumerate() {
+            println!("u[{k}]: {s:e}");
+            assert_eq!(s.is_nan(), k == 3 || k == 5, "u[{k}]: {s}");
+        }
+    }
+}
