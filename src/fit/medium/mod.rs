@@ -51,7 +51,7 @@ pub struct MediumFit {
     pub residual_over_noise: f64,
     pub pixels: usize,
     pub radii: Vec<f64>,
-    /// Profiles computed, and the solver's evaluations.
+    /// Profiles computed (the nodes of the fit's atlas), and the solver's evaluations.
     pub profiles: usize,
     pub evaluations: usize,
     pub converged: bool,
@@ -283,9 +283,8 @@ pub fn predict_with(
 }
 
 fn predict_physical(p: &problem::Physical, radius: &Radius) -> [Vec<f64>; 3] {
-    let t = profiles(std::slice::from_ref(radius), p, &[0, 1, 2]);
+    let tables = profiles(radius.radius_mm, p);
     std::array::from_fn(|c| {
-        let table = t[0][c].as_ref().expect("every channel's profile");
         radius.pixels[c]
             .iter()
             .map(|px| {
@@ -294,7 +293,7 @@ fn predict_physical(p: &problem::Physical, radius: &Radius) -> [Vec<f64>; 3] {
                     &p.media[c],
                     radius.radius_mm,
                     &p.boundary,
-                    table,
+                    &tables[c],
                     px,
                 )
             })

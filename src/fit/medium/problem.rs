@@ -121,25 +121,14 @@ fn free(v: f64, (lo, hi): (f64, f64)) -> f64 {
     }
 }
 
-/// M(θ) per radius and channel.
-pub(super) type Profiles = Vec<[Option<Tabulated>; 3]>;
-
-/// The profiles of `channels` for every radius, in parallel.
-pub(super) fn profiles(radii: &[Radius], p: &Physical, channels: &[usize]) -> Profiles {
-    let jobs: Vec<(usize, usize)> = (0..radii.len())
-        .flat_map(|r| channels.iter().map(move |&c| (r, c)))
+/// M(θ) of each channel on a sphere of `radius_mm`, computed directly, in parallel (for a
+/// prediction outside the fit: the held-out radius, a medium read back from fit.json).
+pub(super) fn profiles(radius_mm: f64, p: &Physical) -> [Tabulated; 3] {
+    let tables: Vec<Tabulated> = (0..3)
+        .into_par_iter()
+        .map(|c| SphereDiffusion::through(&p.media[c], radius_mm, &p.boundary).tabulate())
         .collect();
-    let tables: Vec<Tabulated> = jobs
-        .par_iter()
-        .map(|&(r, c)| {
-            SphereDiffusion::through(&p.media[c], radii[r].radius_mm, &p.boundary).tabulate()
-        })
-        .collect();
-    let mut out: Profiles = radii.iter().map(|_| [None, None, None]).collect();
-    for ((r, c), t) in jobs.into_iter().zip(tables) {
-        out[r][c] = Some(t);
-    }
-    out
+    tables.try_into().expect("three channels")
 }
 
 /// The predicted radiance of one pixel: E · law(cos φ) · M(θ), times the exit's azimuthal
