@@ -56,29 +56,9 @@ pub struct FactorGradient {
 /// `cos_theta` = n·l, `cos_phi` = n·v and `cos_light_view` = l·v. sin θᵢ cos ψ is
 /// (cos φ cos θ − l·v)/(η sin θ): the view's part along the surface, (v − n cos φ), against the
 /// direction away from the light, (n cos θ − l)/sin θ, with the tangential part refracted by 1/η.
+///
+/// With the factor, its derivatives (0 where it, or sin θᵢ cos ψ, is held at its range's edge).
 pub fn factor(
-    log_slope: f64,
-    sigma_t_radius: f64,
-    k: f64,
-    eta: f64,
-    cos_theta: f64,
-    cos_phi: f64,
-    cos_light_view: f64,
-) -> f64 {
-    factor_with_gradient(
-        log_slope,
-        sigma_t_radius,
-        k,
-        eta,
-        cos_theta,
-        cos_phi,
-        cos_light_view,
-    )
-    .0
-}
-
-/// [`factor`] and its derivatives (0 where it, or sin θᵢ cos ψ, is held at its range's edge).
-pub fn factor_with_gradient(
     log_slope: f64,
     sigma_t_radius: f64,
     k: f64,
@@ -145,7 +125,7 @@ mod tests {
             let view_t = v - n * cp;
             let direct = view_t.dot(&away) / eta;
             // factor = 1 + k a along with a = −slope/σt′R: a slope of −σt′R and k 1 give 1 + along.
-            let along = factor(-1.0, 1.0, 1.0, eta, ct, cp, l.dot(&v)) - 1.0;
+            let along = factor(-1.0, 1.0, 1.0, eta, ct, cp, l.dot(&v)).0 - 1.0;
             assert!((along - direct).abs() < 1e-12, "{along} against {direct}");
         }
     }
@@ -155,14 +135,14 @@ mod tests {
     #[test]
     fn the_gradient_follows_central_differences() {
         let (ls, str_, k, eta, ct, cp, lv) = (-2.0, 12.0, 0.9, 1.44, 0.3, 0.7, -0.1);
-        let (f, g) = factor_with_gradient(ls, str_, k, eta, ct, cp, lv);
+        let (f, g) = factor(ls, str_, k, eta, ct, cp, lv);
         let h = 1e-6;
         let d = |m: &dyn Fn(f64) -> f64| (m(h) - m(-h)) / (2.0 * h);
         let numeric = [
-            d(&|e| factor(ls + e, str_, k, eta, ct, cp, lv)),
-            d(&|e| factor(ls, str_ * e.exp(), k, eta, ct, cp, lv)),
-            d(&|e| factor(ls, str_, k + e, eta, ct, cp, lv)),
-            d(&|e| factor(ls, str_, k, eta + e, ct, cp, lv)),
+            d(&|e| factor(ls + e, str_, k, eta, ct, cp, lv).0),
+            d(&|e| factor(ls, str_ * e.exp(), k, eta, ct, cp, lv).0),
+            d(&|e| factor(ls, str_, k + e, eta, ct, cp, lv).0),
+            d(&|e| factor(ls, str_, k, eta + e, ct, cp, lv).0),
         ];
         let analytic = [g.log_slope, g.ln_sigma_t_radius, g.k, g.eta];
         assert!(f != 1.0 && analytic.iter().all(|v| v.abs() > 1e-3));

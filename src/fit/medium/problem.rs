@@ -142,8 +142,20 @@ pub(super) fn predicted(
     px: &Px,
 ) -> f64 {
     let (m, log_slope) = table.at_with_log_slope(px.cos_theta);
-    let k = tangential_flux::coefficient(medium.reduced_albedo());
-    let flux = tangential_flux::factor(
+    let (flux, _, _) = flux_at(medium, radius_mm, log_slope, px);
+    e * boundary.exit_law(px.cos_phi) * m * flux
+}
+
+/// The flux's factor at a pixel ([`tangential_flux::factor`]) with its derivatives, and the
+/// derivative of its coefficient in y = ln(1 − α′).
+fn flux_at(
+    medium: &Medium,
+    radius_mm: f64,
+    log_slope: f64,
+    px: &Px,
+) -> (f64, tangential_flux::FactorGradient, f64) {
+    let (k, dk_dy) = tangential_flux::coefficient_with_slope(medium.reduced_albedo());
+    let (flux, g) = tangential_flux::factor(
         log_slope,
         medium.sigma_t_reduced() * radius_mm,
         k,
@@ -152,7 +164,7 @@ pub(super) fn predicted(
         px.cos_phi,
         px.cos_light_view,
     );
-    e * boundary.exit_law(px.cos_phi) * m * flux
+    (flux, g, dk_dy)
 }
 
 /// [`predicted`] from the atlas's profile and exit law, with its derivatives in the atlas's
@@ -167,16 +179,7 @@ fn predicted_with_gradient(
 ) -> (f64, [f64; 3]) {
     let at = Tabulated::locate(px.cos_theta);
     let (m, log_slope) = profile.value.at_node(at);
-    let (k, dk_dy) = tangential_flux::coefficient_with_slope(medium.reduced_albedo());
-    let (flux, g) = tangential_flux::factor_with_gradient(
-        log_slope,
-        medium.sigma_t_reduced() * radius_mm,
-        k,
-        medium.eta,
-        px.cos_theta,
-        px.cos_phi,
-        px.cos_light_view,
-    );
+    let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
     let (l, dl_deta) = law.at(px.cos_phi);
     let scale = e * l;
     let gradient = std::array::from_fn(|q| {
