@@ -17,8 +17,11 @@ use crate::model::idx;
 pub const PROFILE: &str =
     "diffusion in the sphere, beam sources, level corrected to the photon tally; GGX boundary (docs/medium.md)";
 
-/// The notes' threshold: residuals above this many times the noise are said.
-const MISFIT: f64 = 2.0;
+/// The notes' threshold: residuals above this many times the noise are said. The goal
+/// for a model that describes the photos; on the eleven physically based sessions of
+/// docs/medium.md the wax and soap fits are at 0.91–1.21 and the jade-like ones at 1.88–8.1
+/// (at 2 the note missed jade-3, 1.88, whose σs′ was 29% off).
+const MISFIT: f64 = 1.5;
 
 /// `--model medium` needs the joint fit's light and η.
 pub(super) fn check(opts: &Options) -> Result<()> {
@@ -126,7 +129,7 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     }
     if f.residual_over_noise > MISFIT {
         notes.push(format!(
-            "medium: residuals {:.1}× the noise: the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (docs/medium.md names what the model leaves out)",
+            "medium: residuals {:.1}× the noise: the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (their stated errors are widened by it; docs/medium.md names what the model leaves out)",
             f.residual_over_noise
         ));
     }
@@ -185,7 +188,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             "fitted with the medium (no --irradiance)".into()
         },
         std_source: format!(
-            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′",
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′",
             if f.std_jackknife.is_some() {
                 "larger of formal and jackknife"
             } else {
@@ -193,6 +196,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             },
             100.0 * MODEL_ERROR.sigma_a,
             100.0 * MODEL_ERROR.sigma_s_reduced,
+            f.residual_over_noise.max(1.0),
             MODEL_ERROR.eta
         ),
         residual_over_noise: f.residual_over_noise,

@@ -948,6 +948,42 @@ fn the_medium_of_the_soap_renders() {
     the_loop_closes(&dir.path().join("fit.json"), m);
 }
 
+/// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), which the diffusion
+/// model does not describe: the output must say so, and its errors must be widened toward the
+/// truth. All five radii fitted, the residuals are 1.89 times the noise, so the misfit note is
+/// there (its threshold 1.5). With the model's error scaled by the misfit the worst of σa and
+/// σs′ is 2.61 of its stated std (red σs′, 38% off, η 2.3 std low); unscaled it was 4.67.
+/// Asserted 3.5: short of covering, and said so in docs/medium.md.
+#[test]
+fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-3");
+    let (_dir, t, f) = medium_solve(&src, &[]);
+    let m = f.medium.as_ref().expect("fit.json's medium");
+    assert!(
+        f.notes
+            .iter()
+            .any(|n| n.starts_with("medium: residuals") && n.contains("the noise")),
+        "{:?}",
+        f.notes
+    );
+    let mut worst = 0.0f64;
+    for c in 0..3 {
+        for (fitted, truth) in [
+            (&m.sigma_a_per_mm, t.media[c].sigma_a),
+            (&m.sigma_s_reduced_per_mm, t.media[c].sigma_s_reduced),
+        ] {
+            let std = fitted.std[c];
+            assert!(std.is_finite(), "a stated error");
+            worst = worst.max((fitted.value[c] - truth).abs() / std);
+        }
+    }
+    println!(
+        "residuals {:.2}× the noise, worst error {worst:.2} std",
+        m.residual_over_noise
+    );
+    assert!(worst < 3.5, "{worst}");
+}
+
 /// `close-loop`: the fitted medium path-traced back into every sphere meets the photos as well
 /// as the medium model the fit minimised does (the model is independent code: diffusion in the
 /// sphere, not a random walk). Measured (2026-12-05) on soap (15 mm held out of the fit) at
