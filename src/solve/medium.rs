@@ -171,10 +171,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
         alpha: f.alpha,
         sigma_a_per_mm: per(d.sigma_a),
         sigma_s_reduced_per_mm: per(d.sigma_s_reduced),
-        eta: ValueJson {
-            value: d.eta.0,
-            std: d.eta.1,
-        },
+        eta: value(d.eta),
         eta_sources: Some(EtaSourcesJson {
             joint: value(f.eta_sources.joint),
             pixels: value(f.eta_sources.pixels),

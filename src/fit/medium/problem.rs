@@ -167,8 +167,8 @@ fn flux_at(
     (flux, g, dk_dy)
 }
 
-/// [`predicted`] from the atlas's profile and exit law, with its derivatives in the atlas's
-/// coordinates (x, y, η): the same product, each factor differentiated.
+/// [`predicted`] from the atlas's profile and exit law, with `gradient` its derivatives in the
+/// atlas's coordinates (x, y, η): the same product, each factor differentiated (without, zeros).
 fn predicted_with_gradient(
     e: f64,
     medium: &Medium,
@@ -176,12 +176,16 @@ fn predicted_with_gradient(
     law: &ExitLaw,
     profile: &Profile,
     px: &Px,
+    gradient: bool,
 ) -> (f64, [f64; 3]) {
     let at = Tabulated::locate(px.cos_theta);
     let (m, log_slope) = profile.value.at_node(at);
     let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
     let (l, dl_deta) = law.at(px.cos_phi);
     let scale = e * l;
+    if !gradient {
+        return (scale * m * flux, [0.0; 3]);
+    }
     let gradient = std::array::from_fn(|q| {
         let (dm, ds) = profile.d[q].at_node(at);
         let own = match q {
@@ -279,6 +283,7 @@ impl<'a> Problem<'a> {
                         &self.law,
                         profile,
                         px,
+                        gradient,
                     );
                     out[at + k] = (px.radiance - pred) * px.weight;
                     if gradient {
