@@ -57,12 +57,26 @@ pub struct Radius {
     pub pixels: [Vec<Px>; 3],
 }
 
-/// Whether a pixel is fitted: its half vector more than 25° from the normal (out of the lobe)
-/// and φ within 75° (off the rim).
-pub fn fitted(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
+/// Whether the diffusion model describes a pixel at all: its half vector more than 25° from
+/// the normal (out of the lobe) and φ within 75° (off the rim).
+pub fn described(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
     let h = (light + v).normalize();
     n.dot(&h) <= 25f64.to_radians().cos() && n.dot(v) >= 75f64.to_radians().cos()
 }
+
+/// Whether a pixel is fitted: [`described`], and θ within [`MAX_THETA_DEG`].
+pub fn fitted(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool {
+    described(n, v, light) && n.dot(light) >= MAX_THETA_DEG.to_radians().cos()
+}
+
+/// The deepest shadow fitted (θ, degrees). Further past the terminator the light has crossed
+/// the sphere and leaves it mostly away from the light, where the model's exit law (the first
+/// azimuthal harmonic, checked against the photon tally up to 95°) sends too much toward a
+/// camera on the light's side: at the truth, wax's photos hold 0.71–0.85 of the model's light
+/// beyond 105° on its red channel (the longest diffusion length), and fitting them pulled red's
+/// σa 12–18% high. Chosen among 95°, 100°, 105° and none by the errors against the truth of the
+/// eleven physically based sessions (docs/medium.md, "The deepest shadow fitted").
+pub const MAX_THETA_DEG: f64 = 105.0;
 
 /// The spheres' fitted pixels, pooled by radius (in increasing radius).
 pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
