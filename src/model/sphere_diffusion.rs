@@ -166,7 +166,8 @@ impl SphereDiffusion {
     }
 
     /// [`Self::corrected`] with the light entering through `boundary` (its T(μ) instead of
-    /// Fresnel's; the beam still refracts as through a smooth surface, and the boundary's
+    /// Fresnel's; each beam along the transmitted light's mean direction,
+    /// [`Boundary::refracted_sine`], and the boundary's
     /// internal reflection is the smooth one's A), and the rough boundary's loss of level
     /// ([`Boundary::level`]).
     pub fn through(medium: &Medium, radius: f64, boundary: &Boundary) -> SphereDiffusion {
@@ -232,8 +233,10 @@ impl SphereDiffusion {
         let eta = medium.eta;
         let kappa = medium.sigma_tr();
         let h = robin_h(medium);
-        // The shallowest source: the first node at the critical angle's refraction.
-        let cos_t_min = (1.0 - 1.0 / (eta * eta)).sqrt();
+        // The shallowest source: the first node on the shallowest beam (the critical angle's,
+        // or a rough boundary's grazing mean direction, shallower still).
+        let sin_t_max = boundary.refracted_sine(0.0).max(1.0 / eta);
+        let cos_t_min = (1.0 - sin_t_max * sin_t_max).sqrt();
         let shallowest = (s_nodes[0] / st * cos_t_min).min(0.5 * radius);
         let order = ((cut.reach * radius / shallowest).ceil() as usize + 8)
             .min(cut.roll_off.map_or(8000, |r| r.1));
@@ -254,7 +257,7 @@ impl SphereDiffusion {
         for (theta_e, w) in entry_nodes(cut.roll_off.map_or(order, |r| order.min(r.0))) {
             let (sin_e, cos_e) = theta_e.sin_cos();
             let entering = boundary.transmission(cos_e) * cos_e * sin_e * w;
-            let sin_t = sin_e / eta;
+            let sin_t = boundary.refracted_sine(cos_e);
             let cos_t = (1.0 - sin_t * sin_t).sqrt();
             // Meridian plane: entry y = R (sin θe, cos θe); the beam runs along
             // cos θt (−n) + sin θt e_θ, with e_θ = (cos θe, −sin θe).
