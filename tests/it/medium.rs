@@ -876,7 +876,7 @@ fn the_rough_boundary_transmits_as_the_sampled_one() {
 /// The rough boundary in the model against the photon tally with the renders' GGX boundary
 /// (wax-like, α 0.15, 35 mm): near the terminator Fresnel's entry misses a third of the light
 /// (the tally over the model measured 1.33 at 80–90°); T_α's entry with the beams along the
-/// transmitted light's mean direction, 0.996 (1.05 with Snell's beams); on the lit side the
+/// transmitted light's mean direction, 0.983 (1.05 with Snell's beams); on the lit side the
 /// rough boundary's loss of level brings the model from 4% bright to 0.998. Asserted: 80–90°
 /// within 0.96–1.04 and Fresnel's > 1.2; 0–60° within 0.98–1.02.
 #[test]
@@ -965,10 +965,10 @@ fn the_medium_of_the_soap_renders() {
 
 /// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), which the diffusion
 /// model does not describe: the output must say so, and its errors must be widened toward the
-/// truth. All five radii fitted, the residuals are 1.93 times the noise, so the misfit note is
+/// truth. All five radii fitted, the residuals are 1.90 times the noise, so the misfit note is
 /// there (its threshold 1.5). With the model's error scaled by the misfit the worst of σa and
-/// σs′ is 2.59 of its stated std (2.61 with the deepest shadow fitted too); unscaled it was
-/// 4.67.
+/// σs′ is 2.11 of its stated std (2.61 with Snell's beams and the deepest shadow fitted);
+/// unscaled it was 4.67.
 /// Asserted 3.5: short of covering, and said so in docs/medium.md.
 #[test]
 fn a_medium_the_model_misses_is_said_and_its_errors_cover() {

@@ -13,6 +13,11 @@ use nalgebra::{DMatrix, DVector};
 /// docs/medium.md, "The medium fit"): σa −4 to +19%, σs′ −12 to +16%, and the pixels' η 0.04 to
 /// 0.10 low (rms 0.067). The statistical errors alone were 0.2–3%. Set so that each of these
 /// lies within 1.5 of its stated error; the jade-like renders, not used to set them, test them.
+/// Since the deepest shadow left the fit and the beams follow the transmitted light's mean
+/// direction, the same sessions' errors are σa −2.6 to +5.6% and σs′ −6.2 to +2.5%: the terms
+/// are about three times what they need, and are kept until the pixels' noise is measured
+/// right (docs/medium.md, "The renders' noise"), which moves every weight and the jade-like
+/// fits' misfit that scales them.
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
 /// terms on σa and σs′ are scaled by the residuals' RMS over the noise when above 1 (as a scale
