@@ -110,9 +110,7 @@ impl Boundary {
         if self.is_smooth() {
             return fresnel::transmission(mu, self.eta);
         }
-        let x = mu.clamp(0.0, 1.0).sqrt() * TABLE as f64;
-        let (i, f) = ((x.floor() as usize).min(TABLE - 1), x - x.floor());
-        self.table[i] * (1.0 - f.min(1.0)) + self.table[i + 1] * f.min(1.0)
+        at(&self.table, mu)
     }
 
     /// The sine of the angle from the inward normal of the light that enters at cos μ: Snell's
@@ -126,9 +124,7 @@ impl Boundary {
         if self.is_smooth() {
             return (1.0 - mu * mu).sqrt() / self.eta;
         }
-        let x = mu.sqrt() * TABLE as f64;
-        let (i, f) = ((x.floor() as usize).min(TABLE - 1), x - x.floor());
-        self.sines[i] * (1.0 - f.min(1.0)) + self.sines[i + 1] * f.min(1.0)
+        at(&self.sines, mu)
     }
 
     /// c = ∫₀¹ T(μ) 2μ dμ: the fraction of diffuse light from outside that enters.
@@ -155,6 +151,13 @@ impl Boundary {
         self.transmission(mu) / (PI * self.hemispherical)
             * (1.0 + EXIT_TILT * (self.mean_cosine - mu))
     }
+}
+
+/// A rough boundary's table (at μ = (k/TABLE)²) at cos μ, linear in √μ.
+fn at(table: &[f64], mu: f64) -> f64 {
+    let x = mu.clamp(0.0, 1.0).sqrt() * TABLE as f64;
+    let (i, f) = ((x.floor() as usize).min(TABLE - 1), x - x.floor());
+    table[i] * (1.0 - f.min(1.0)) + table[i + 1] * f.min(1.0)
 }
 
 /// T_α(μ): light arriving from outside at cos μ through GGX microfacets of roughness α, 24 × 32
