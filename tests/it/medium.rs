@@ -1486,3 +1486,69 @@ fn the_exit_follows_the_flux_along_the_surface() {
         }
     }
 }
+
+/// The photos over the medium fit's model at the truth (its medium, η, roughness, light and
+/// irradiance), per band of θ past the lit side, every sphere and channel of a physically based
+/// session (`SESSION`, default `pbr-wax`; `datasets/` or `datasets/pbr-seeds/`), every pixel off
+/// the highlight and the rim, so past the fit's θ limit too. The table of docs/medium.md, "The
+/// deepest shadow fitted"; by hand (about 10 s):
+/// `cargo test --release --test it -- --ignored medium::the_renders_over_the_model_at_the_truth --nocapture`.
+#[test]
+#[ignore]
+fn the_renders_over_the_model_at_the_truth() {
+    use workbench::fit::medium::{predict_with, Px, Radius};
+    let name = std::env::var("SESSION").unwrap_or_else(|_| "pbr-wax".into());
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
+    let src = [root.join(&name), root.join("pbr-seeds").join(&name)]
+        .into_iter()
+        .find(|p| p.join("truth.json").exists())
+        .expect("a session with truth.json");
+    let dir = common::session_copy(&src);
+    let t = truth(dir.path());
+    let loaded = load_quiet(dir.path());
+    const BANDS: [f64; 10] = [
+        60.0, 70.0, 80.0, 85.0, 90.0, 95.0, 100.0, 105.0, 110.0, 120.0,
+    ];
+    println!("{name}: photos / model at the truth, θ bands {BANDS:?}");
+    for s in &loaded.spheres {
+        let radius = Radius {
+            radius_mm: s.radius_mm,
+            pixels: std::array::from_fn(|c| {
+                s.obs
+                    .iter()
+                    .filter(|o| {
+                        described(&o.geometry.normal, &o.geometry.view, &t.light)
+                            && o.weight[c] > 0.0
+                    })
+                    .map(|o| {
+                        let (n, v) = (o.geometry.normal, o.geometry.view);
+                        Px::at(&n, &v, &t.light, o.radiance[c], o.weight[c])
+                    })
+                    .collect()
+            }),
+        };
+        let predicted = predict_with(t.media, [t.irradiance; 3], t.alpha, &radius);
+        for c in 0..3 {
+            let mut sums = [(0.0, 0.0); BANDS.len() - 1];
+            for (px, p) in radius.pixels[c].iter().zip(&predicted[c]) {
+                let theta = px.cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
+                if let Some(b) = BANDS.windows(2).position(|w| (w[0]..w[1]).contains(&theta)) {
+                    sums[b].0 += px.radiance;
+                    sums[b].1 += p;
+                }
+            }
+            let ratios: Vec<String> = sums
+                .iter()
+                .map(|(l, p)| {
+                    if *p > 0.0 {
+                        format!("{:.3}", l / p)
+                    } else {
+                        "—".into()
+                    }
+                })
+                .collect();
+            println!("  {} mm, channel {c}: {}", s.radius_mm, ratios.join(" "));
+            assert!(ratios.iter().any(|r| r != "—"), "pixels in some band");
+        }
+    }
+}

@@ -72,9 +72,10 @@ pub fn fitted(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool 
 /// The deepest shadow fitted (θ, degrees). Further past the terminator the light has crossed
 /// the sphere and leaves it mostly away from the light, where the model's exit law (the first
 /// azimuthal harmonic, checked against the photon tally up to 95°) sends too much toward a
-/// camera on the light's side: at the truth, beyond 100° wax's photos hold 0.73–0.85 of the
-/// model's red light (the longest diffusion length; 0.49 at 110–120° on the 35 mm sphere), and
-/// fitting them pulled red's σa 12–18% high. Chosen among 95°, 100°, 105° and none by the errors
+/// camera on the light's side: at the truth, 105–110° from the light wax's photos hold
+/// 0.70–0.81 of the model's red light on the 20–35 mm spheres (the longest diffusion length;
+/// 0.49–0.92 beyond; `medium::the_renders_over_the_model_at_the_truth`), and fitting them
+/// pulled red's σa 12–18% high. Chosen among 95°, 100°, 105° and none by the errors
 /// against the truth of the eight wax and soap sessions, with Snell's beams and with the beams
 /// along the transmitted light's mean direction (docs/medium.md, "The deepest shadow fitted").
 pub const MAX_THETA_DEG: f64 = 105.0;
