@@ -1528,9 +1528,9 @@ fn the_renders_over_the_model_at_the_truth() {
             }),
         };
         let predicted = predict_with(t.media, [t.irradiance; 3], t.alpha, &radius);
-        for c in 0..3 {
+        for (c, (pixels, predicted)) in radius.pixels.iter().zip(&predicted).enumerate() {
             let mut sums = [(0.0, 0.0); BANDS.len() - 1];
-            for (px, p) in radius.pixels[c].iter().zip(&predicted[c]) {
+            for (px, p) in pixels.iter().zip(predicted) {
                 let theta = px.cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
                 if let Some(b) = BANDS.windows(2).position(|w| (w[0]..w[1]).contains(&theta)) {
                     sums[b].0 += px.radiance;
