@@ -18,7 +18,9 @@
 /// The tangential term's coefficient over P1's, c₀ + c₁ √(1 − α′): least squares against the
 /// photon tally's first azimuthal harmonic over 58 spheres (`cargo test --release --test it --
 /// --ignored medium::tangential_flux_against_the_photon_tally --nocapture`, docs/medium.md).
-/// P1 overstates the harmonic at moderate albedo and understates it near 1.
+/// P1 overstates the harmonic at moderate albedo and understates it near 1. Fitted with Snell's
+/// beams; with the beams along the transmitted light's mean direction the same harness gives
+/// [1.150, −0.940], leaving the same share unexplained (docs/medium.md): kept.
 pub const TANGENTIAL_FLUX: [f64; 2] = [1.15, -1.0];
 
 /// [`TANGENTIAL_FLUX`]'s coefficient at reduced albedo α′ (√(1 − α′) held within the fitted
