@@ -24,3 +24,11 @@ if ! command -v cargo >/dev/null 2>&1; then
   echo "cargo not found: install Rust (https://rustup.rs) first" >&2
   exit 1
 fi
+# Mitsuba 3 (with Dr.Jit), for the test that loads and renders `workbench export --to mitsuba`
+# (tests/it/medium.rs): from PyPI into the build folder, where the tests look for it; no numpy.
+cd "$(dirname "$0")/.."
+mitsuba_dir="${CARGO_TARGET_DIR:-target}/python"
+if ! PYTHONPATH="$mitsuba_dir" python3 -c "import mitsuba; assert mitsuba.__version__ == '3.9.1'" 2>/dev/null; then
+  echo "installing: mitsuba 3.9.1 (PyPI) into $mitsuba_dir" >&2
+  python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore --upgrade --target "$mitsuba_dir" mitsuba==3.9.1
+fi

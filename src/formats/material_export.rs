@@ -49,14 +49,14 @@ fn three(v: [f64; 3], sep: &str) -> String {
 
 /// Mitsuba 3: `roughdielectric` (GGX, α, int_ior η) around a `homogeneous` medium (σt, albedo,
 /// isotropic phase), on a sphere. Mitsuba has no units: the scene is in millimetres, so σt is
-/// per millimetre.
+/// per millimetre (`sigma_t` times `scale`).
 fn mitsuba(m: &MediumJson, radius_mm: f64) -> String {
     let (t, albedo) = m.extinction_and_albedo();
     let mut s = String::new();
     let _ = writeln!(s, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
     let _ = writeln!(
         s,
-        "<!-- workbench export: the measured medium (docs/medium.md). Units: millimetres; sigma_t in 1/mm. \
+        "<!-- workbench export: the measured medium (docs/medium.md). Units: millimetres; extinction = sigma_t times scale, in 1/mm. \
          Isotropic phase: sigma_s = sigma_s' of fit.json. Load with mitsuba.load_file(); add a sensor, emitter and volpath integrator to render. -->"
     );
     let _ = writeln!(s, "<scene version=\"3.0.0\">");
@@ -86,12 +86,15 @@ fn mitsuba(m: &MediumJson, radius_mm: f64) -> String {
         "        <rgb name=\"albedo\" value=\"{}\"/>",
         three(albedo, ", ")
     );
+    // Mitsuba reads an `rgb` as a reflectance, refused outside [0, 1] (jade's σt is 2 /mm): the
+    // extinction is written over its largest channel, that channel's value the medium's `scale`.
+    let scale = t.iter().copied().fold(f64::MIN_POSITIVE, f64::max);
     let _ = writeln!(
         s,
         "        <rgb name=\"sigma_t\" value=\"{}\"/>",
-        three(t, ", ")
+        three(t.map(|v| v / scale), ", ")
     );
-    let _ = writeln!(s, "        <float name=\"scale\" value=\"1.0\"/>");
+    let _ = writeln!(s, "        <float name=\"scale\" value=\"{scale:?}\"/>");
     let _ = writeln!(s, "        <phase type=\"isotropic\"/>");
     let _ = writeln!(s, "    </medium>");
     let _ = writeln!(s, "    <shape type=\"sphere\">");

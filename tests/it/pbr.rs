@@ -14,7 +14,7 @@ use workbench::synth::volpath::{self, Medium, Scene};
 /// Sums per band of θ (angle between normal and light, `width` degrees a band) over pixels at
 /// least `inset` pixels inside the silhouette: one sum per image given, per channel, and the
 /// pixel count. `skip`: pixels to leave out (saturated in a reference).
-fn bands(
+pub(crate) fn bands(
     cam: &Camera,
     s: &Sphere,
     l: &Vector3<f64>,

@@ -122,6 +122,34 @@ pub fn system_tool(program: &'static str, package: &str) -> Option<&'static str>
     None
 }
 
+/// Mitsuba 3 as `scripts/setup-system.sh` installs it (into the build folder's `python/`): the
+/// Python program and the `PYTHONPATH` that imports it, or None with the reason recorded
+/// ([`skipped`]); its absence fails the test under `CI=true`.
+pub fn mitsuba() -> Option<(&'static str, std::path::PathBuf)> {
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .parent()
+        .expect("the build folder")
+        .join("python");
+    let ok = std::process::Command::new("python3")
+        .args(["-c", "import mitsuba"])
+        .env("PYTHONPATH", &path)
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(("python3", path));
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "Mitsuba 3 missing under CI=true: scripts/setup-system.sh installs it into {}",
+        path.display()
+    );
+    skipped(&format!(
+        "Mitsuba 3 not installed in {} (scripts/setup-system.sh installs it)",
+        path.display()
+    ));
+    None
+}
+
 /// Where the tests that skipped list themselves: `scripts/test.sh` prints it at the end of a run
 /// (the harness hides a passing test's output).
 pub const SKIPPED_LIST: &str = concat!(env!("CARGO_TARGET_TMPDIR"), "/skipped-tests.txt");
