@@ -9,12 +9,14 @@
 //!   (diverging map, zero white, symmetric limits) and its colour bar;
 //! - `correlation`: the free parameters' correlation matrix with values;
 //! - `holdout`: predicted against observed for the held-out radius (with `--holdout`);
+//! - `medium-radiance-theta`, `medium-residual-theta`: the same two against θ for the medium fit
+//!   (`solve --model medium`), on its pixels and with its model;
 //! - `index.html` ([`crate::figures::report`]): all of them with the fit's summary.
 
 use crate::error::{Error, Result};
 use crate::figures::report::Named;
 use crate::fit::observe::SphereData;
-use crate::formats::fit::FitFile;
+use crate::formats::fit::{FitFile, MediumJson};
 use crate::model::{Model, Params};
 use crate::plot::{
     colorbar, diverging, Figure, Layer, Plot, Swatch, BLACK_LINE, BLUE, GREEN, GREY, PALETTE,
@@ -662,8 +664,110 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
             figure: holdout(fit, g),
         });
     }
+    if let Some(m) = &fit.medium {
+        let medium = medium_groups(fit, m, &groups);
+        out.push(Named {
+            name: "medium-radiance-theta".into(),
+            caption: "The medium fit (solve --model medium): its pixels (off the highlight and the rim, θ up to 105°) against θ per channel, per radius, its model's prediction as solid curves.".into(),
+            figure: radiance_theta(&medium, "medium fit", false),
+        });
+        out.push(Named {
+            name: "medium-residual-theta".into(),
+            caption: "The medium fit: data − its model against θ per radius (% of the radius's peak radiance), running medians per channel.".into(),
+            figure: residual_against(&medium, Axis::Theta),
+        });
+    }
     out.extend(groups.iter().flat_map(residual_images));
     out
+}
+
+/// The spheres by radius under the medium fit (fit.json's `"medium"`): each sphere's pixels the
+/// medium fit uses ([`crate::fit::medium::fitted`] under the joint fit's light, every channel
+/// weighted) with its model's prediction there ([`crate::fit::medium::predict_with`], the
+/// profiles computed once a radius), in the colours and scales of `groups`.
+fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec<Group<'a>> {
+    use crate::fit::medium::{self, Px, Radius};
+    let media = std::array::from_fn(|c| crate::model::dipole::Medium {
+        sigma_a: m.sigma_a_per_mm.value[c],
+        sigma_s_reduced: m.sigma_s_reduced_per_mm.value[c],
+        eta: m.eta.value,
+    });
+    let angle = |a: f64| a.clamp(-1.0, 1.0).acos().to_degrees();
+    groups
+        .par_iter()
+        .map(|g| {
+            let light = fit.params_for(g.radius_mm).light.direction();
+            // Per sphere: the indices of its observations the medium fit uses.
+            let chosen: Vec<Vec<usize>> = g
+                .spheres
+                .iter()
+                .map(|e| {
+                    let s = e.sphere;
+                    let stride = (s.obs.len() / PIXELS).max(1);
+                    (0..s.obs.len())
+                        .step_by(stride)
+                        .filter(|&i| {
+                            let o = &s.obs[i];
+                            o.weight.iter().all(|w| *w > 0.0)
+                                && medium::fitted(&o.geometry.normal, &o.geometry.view, &light)
+                        })
+                        .collect()
+                })
+                .collect();
+            let obs = || {
+                g.spheres
+                    .iter()
+                    .zip(&chosen)
+                    .flat_map(|(e, idx)| idx.iter().map(move |&i| &e.sphere.obs[i]))
+            };
+            let px = |c: usize| -> Vec<Px> {
+                obs()
+                    .map(|o| {
+                        let n = &o.geometry.normal;
+                        Px::at(n, &o.geometry.view, &light, o.radiance[c], o.weight[c])
+                    })
+                    .collect()
+            };
+            let radius = Radius {
+                radius_mm: g.radius_mm,
+                pixels: [px(0), px(1), px(2)],
+            };
+            let model = medium::predict_with(media, m.irradiance.value, m.alpha, &radius);
+            let mut at = 0;
+            let spheres = g
+                .spheres
+                .iter()
+                .zip(&chosen)
+                .map(|(e, idx)| {
+                    let s = e.sphere;
+                    let rows = at..at + idx.len();
+                    at += idx.len();
+                    Evaluated {
+                        sphere: s,
+                        theta: rows
+                            .clone()
+                            .map(|k| angle(radius.pixels[0][k].cos_theta))
+                            .collect(),
+                        phi: rows
+                            .clone()
+                            .map(|k| angle(radius.pixels[0][k].cos_phi))
+                            .collect(),
+                        data: idx.iter().map(|&i| s.obs[i].radiance).collect(),
+                        model: rows.map(|k| std::array::from_fn(|c| model[c][k])).collect(),
+                        baseline: None,
+                        px: idx.iter().map(|&i| s.px[i]).collect(),
+                    }
+                })
+                .collect();
+            Group {
+                radius_mm: g.radius_mm,
+                held_out: g.held_out,
+                color: g.color,
+                spheres,
+                peak: g.peak,
+            }
+        })
+        .collect()
 }
 
 /// The spheres by radius, largest first, each evaluated under the fit (and the baseline).

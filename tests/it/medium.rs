@@ -961,6 +961,30 @@ fn the_medium_of_the_soap_renders() {
     );
     exports_read_back(&dir.path().join("fit.json"), m);
     the_loop_closes(&dir.path().join("fit.json"), m);
+    the_medium_fit_is_drawn(&dir.path().join("fit.json"));
+}
+
+/// `workbench plot` of a medium fit draws the medium's own figures (its pixels and model
+/// against θ, its residuals against θ) beside the CDRF's, each linked from index.html.
+fn the_medium_fit_is_drawn(fit: &Path) {
+    let out = fit.with_file_name("medium-plots");
+    let (code, _, err) = common::wb(&[
+        "--quiet",
+        "plot",
+        fit.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let index = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for (name, size) in [
+        ("medium-radiance-theta", (1700, 1040)),
+        ("medium-residual-theta", (1500, 820)),
+    ] {
+        let png = image::open(out.join(format!("{name}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), size, "{name}");
+        assert!(index.contains(&format!("src=\"{name}.png\"")), "{name}");
+    }
 }
 
 /// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), which the diffusion
