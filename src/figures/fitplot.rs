@@ -687,11 +687,6 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
 /// profiles computed once a radius), in the colours and scales of `groups`.
 fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec<Group<'a>> {
     use crate::fit::medium::{self, Px, Radius};
-    let media = std::array::from_fn(|c| crate::model::dipole::Medium {
-        sigma_a: m.sigma_a_per_mm.value[c],
-        sigma_s_reduced: m.sigma_s_reduced_per_mm.value[c],
-        eta: m.eta.value,
-    });
     let angle = |a: f64| a.clamp(-1.0, 1.0).acos().to_degrees();
     groups
         .par_iter()
@@ -706,11 +701,7 @@ fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec
                     let stride = (s.obs.len() / PIXELS).max(1);
                     (0..s.obs.len())
                         .step_by(stride)
-                        .filter(|&i| {
-                            let o = &s.obs[i];
-                            o.weight.iter().all(|w| *w > 0.0)
-                                && medium::fitted(&o.geometry.normal, &o.geometry.view, &light)
-                        })
+                        .filter(|&i| medium::fitted_obs(&s.obs[i], &light))
                         .collect()
                 })
                 .collect();
@@ -732,7 +723,7 @@ fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec
                 radius_mm: g.radius_mm,
                 pixels: [px(0), px(1), px(2)],
             };
-            let model = medium::predict_with(media, m.irradiance.value, m.alpha, &radius);
+            let model = medium::predict_with(m.media(), m.irradiance.value, m.alpha, &radius);
             let mut at = 0;
             let spheres = g
                 .spheres

@@ -284,6 +284,15 @@ impl MediumJson {
         let t = std::array::from_fn(|c| a[c] + s[c]);
         (t, std::array::from_fn(|c| s[c] / t[c]))
     }
+
+    /// The fitted medium per channel as the diffusion model takes it (σa, σs′, the shared η).
+    pub fn media(&self) -> [crate::model::dipole::Medium; 3] {
+        std::array::from_fn(|c| crate::model::dipole::Medium {
+            sigma_a: self.sigma_a_per_mm.value[c],
+            sigma_s_reduced: self.sigma_s_reduced_per_mm.value[c],
+            eta: self.eta.value,
+        })
+    }
 }
 
 /// A held-out radius's relative RMSE under the medium and under the CDRF.

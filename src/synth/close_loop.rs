@@ -20,7 +20,6 @@ use crate::error::{Error, Result};
 use crate::fit::medium::{self, Px, Radius};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{FitFile, MediumJson};
-use crate::model::dipole;
 use crate::plot::{Figure, Layer, Plot, BLACK_LINE, BLUE, VERMILLION};
 use crate::stats::percentile;
 use nalgebra::Vector3;
@@ -245,11 +244,7 @@ fn rows(
 ) -> Vec<Row> {
     let light = scene.light;
     let chosen: Vec<usize> = (0..s.obs.len())
-        .filter(|&i| {
-            let o = &s.obs[i];
-            o.weight.iter().all(|w| *w > 0.0)
-                && medium::fitted(&o.geometry.normal, &o.geometry.view, &light)
-        })
+        .filter(|&i| medium::fitted_obs(&s.obs[i], &light))
         .collect();
     let stride = chosen.len().div_ceil(opts.pixels.max(1)).max(1);
     let chosen: Vec<usize> = chosen.into_iter().step_by(stride).collect();
@@ -274,12 +269,7 @@ fn rows(
         radius_mm: s.radius_mm,
         pixels: [px(0), px(1), px(2)],
     };
-    let media = std::array::from_fn(|c| dipole::Medium {
-        sigma_a: m.sigma_a_per_mm.value[c],
-        sigma_s_reduced: m.sigma_s_reduced_per_mm.value[c],
-        eta: m.eta.value,
-    });
-    let model = medium::predict_with(media, rendered.irradiance, m.alpha, &radius);
+    let model = medium::predict_with(m.media(), rendered.irradiance, m.alpha, &radius);
     let cdrf = fit.model();
     let params = fit.params_for(s.radius_mm);
     let e = rendered.irradiance;

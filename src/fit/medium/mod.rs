@@ -29,7 +29,7 @@ use std::time::Instant;
 
 pub use derived::{Derived, PerChannel};
 pub use errors::{ModelError, MODEL_ERROR};
-pub use pixels::{described, fitted, pixels, Px, Radius, Setup};
+pub use pixels::{described, fitted, fitted_obs, pixels, Px, Radius, Setup};
 
 /// The medium fit's result.
 #[derive(Clone, Debug, PartialEq)]

@@ -69,6 +69,11 @@ pub fn fitted(n: &Vector3<f64>, v: &Vector3<f64>, light: &Vector3<f64>) -> bool 
     described(n, v, light) && n.dot(light) >= MAX_THETA_DEG.to_radians().cos()
 }
 
+/// Whether an observation is one the medium fit uses: every channel weighted, and [`fitted`].
+pub fn fitted_obs(o: &crate::fit::solver::Obs, light: &Vector3<f64>) -> bool {
+    o.weight.iter().all(|w| *w > 0.0) && fitted(&o.geometry.normal, &o.geometry.view, light)
+}
+
 /// The deepest shadow fitted (θ, degrees). Further past the terminator the light has crossed
 /// the sphere and leaves it mostly away from the light, where the model's exit law (the first
 /// azimuthal harmonic, checked against the photon tally up to 95°) sends too much toward a
