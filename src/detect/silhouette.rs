@@ -354,10 +354,15 @@ struct BandPixel {
     value: f64,
     /// Image index × sectors + angular sector.
     sector: usize,
-    /// Sub-sample points.
-    q: [Vector3<f64>; SUB * SUB],
-    /// Angle from the sector's middle, in sector widths (−½ … ½).
-    dpsi: f64,
+    /// Its place in [`Band::rays`] (the same pixel of every photo shares one).
+    at: usize,
+}
+
+/// The band of every photo: each pixel's place's sub-sample rays and angle from its sector's
+/// middle (in sector widths, −½ … ½), once for all photos, and the photos' pixels.
+struct Band {
+    rays: Vec<([Vector3<f64>; SUB * SUB], f64)>,
+    pixels: Vec<BandPixel>,
 }
 
 type Lin = nalgebra::SVector<f64, NLIN>;
@@ -382,11 +387,16 @@ fn limb_transmission(u: f64) -> f64 {
 /// variation along the rim): the means of coverage, cos φ, T(φ) and T(φ)·cos φ, and the
 /// background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread radially by the blur
 /// (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial offset δ px as s − δ/R.
-fn features(o: &Outline, p: &BandPixel, r_px: f64, blur: f64) -> Lin {
+fn features(
+    o: &Outline,
+    (q, dpsi): &([Vector3<f64>; SUB * SUB], f64),
+    r_px: f64,
+    blur: f64,
+) -> Lin {
     let mut f = Lin::zeros();
     f[0] = 1.0;
     let nodes = if blur > 1e-6 { 5 } else { 1 };
-    for q in &p.q {
+    for q in q {
         let s0 = o.s(q);
         for k in 0..nodes {
             let (ds, w) = if nodes == 1 {
@@ -425,29 +435,33 @@ fn features(o: &Outline, p: &BandPixel, r_px: f64, blur: f64) -> Lin {
         f[k] /= n;
     }
     for k in 0..NBASE {
-        f[NBASE + k] = f[k] * p.dpsi;
+        f[NBASE + k] = f[k] * dpsi;
     }
     f
 }
 
 /// Residuals of the band under an outline and blur, the per-sector linear terms solved in
 /// closed form. Returns residuals and per-sector RMS (NaN for sectors without enough pixels).
+/// The features are computed once a place and shared by the photos.
 fn band_residuals(
     o: &Outline,
     blur: f64,
-    band: &[BandPixel],
+    band: &Band,
     sectors: usize,
     r_px: f64,
 ) -> (Vec<f64>, Vec<f64>) {
     use rayon::prelude::*;
-    let feats: Vec<Lin> = band
+    let at: Vec<Lin> = band
+        .rays
         .par_iter()
-        .map(|p| features(o, p, r_px, blur))
+        .map(|r| features(o, r, r_px, blur))
         .collect();
+    let band = &band.pixels;
+    let feats = || band.iter().map(|p| &at[p.at]);
     let mut ata = vec![LinM::zeros(); sectors];
     let mut atb = vec![Lin::zeros(); sectors];
     let mut count = vec![0usize; sectors];
-    for (p, f) in band.iter().zip(&feats) {
+    for (p, f) in band.iter().zip(feats()) {
         ata[p.sector] += f * f.transpose();
         atb[p.sector] += f * p.value;
         count[p.sector] += 1;
@@ -464,7 +478,7 @@ fn band_residuals(
         .collect();
     let mut res = vec![0.0; band.len()];
     let mut ss = vec![0.0; sectors];
-    for (i, (p, f)) in band.iter().zip(&feats).enumerate() {
+    for (i, (p, f)) in band.iter().zip(feats()).enumerate() {
         if let Some(c) = coef[p.sector] {
             let r = p.value - c.dot(f);
             res[i] = r;
@@ -539,36 +553,31 @@ fn band_pixels(
     images: &[(&Plane, Option<&[bool]>)],
     geo: &[BandGeometry],
     nsec: usize,
-) -> Option<Vec<BandPixel>> {
+) -> Option<Band> {
     let (width, height) = (images[0].0.width, images[0].0.height);
-    let mut band = vec![];
+    let mut pixels = vec![];
     for (i, (img, skip)) in images.iter().enumerate() {
         if img.width != width || img.height != height {
             return None;
         }
-        for (x, y, sector, qs, dpsi) in geo {
+        for (at, (x, y, sector, _, _)) in geo.iter().enumerate() {
             if skip.is_some_and(|m| m[*y as usize * width as usize + *x as usize]) {
                 continue;
             }
-            band.push(BandPixel {
+            pixels.push(BandPixel {
                 value: img.at(*x, *y) as f64,
                 sector: i * nsec + sector,
-                q: *qs,
-                dpsi: *dpsi,
+                at,
             });
         }
     }
-    Some(band)
+    let rays = geo.iter().map(|(_, _, _, q, dpsi)| (*q, *dpsi)).collect();
+    Some(Band { rays, pixels })
 }
 
 /// Sector weights from the starting fit: 1/rms², the rms floored at the median (a sector of
 /// pure noise is not more trustworthy than the typical one); 0 for a sector without its terms.
-fn sector_weights(
-    start: &Outline,
-    band: &[BandPixel],
-    sectors: usize,
-    r_px: f64,
-) -> Option<Vec<f64>> {
+fn sector_weights(start: &Outline, band: &Band, sectors: usize, r_px: f64) -> Option<Vec<f64>> {
     let (_, rms0) = band_residuals(start, 0.0, band, sectors, r_px);
     let mut finite: Vec<f64> = rms0.iter().cloned().filter(|v| v.is_finite()).collect();
     finite.sort_by(|a, b| a.total_cmp(b));
@@ -607,7 +616,7 @@ struct BandFit {
 /// by more than 1 px².
 fn fit_band(
     start: &Outline,
-    band: &[BandPixel],
+    band: &Band,
     sectors: usize,
     (r_px, unit): (f64, f64),
     wpix: &[f64],
@@ -791,12 +800,12 @@ pub(crate) fn refine(
     );
     let band = band_pixels(images, &geo, nsec)?;
     let sectors = images.len() * nsec;
-    if band.len() < 50 {
+    if band.pixels.len() < 50 {
         return None;
     }
     let w = sector_weights(start, &band, sectors, r_px)?;
     let sectors_used = w.iter().filter(|&&v| v > 0.0).count();
-    let wpix: Vec<f64> = band.iter().map(|p| w[p.sector]).collect();
+    let wpix: Vec<f64> = band.pixels.iter().map(|p| w[p.sector]).collect();
     let unit = start.pixel_unit(proj);
     let BandFit {
         x,
@@ -821,7 +830,7 @@ pub(crate) fn refine(
         .map(|cv| cv.fixed_view::<3, 3>(0, 0).into_owned());
     // The larger of the noise's error and the arcs' disagreement (by trace; each a full
     // covariance of the outline's three parameters).
-    let arcs = arc_jackknife(&band, nsec, &cols, &res, &wpix);
+    let arcs = arc_jackknife(&band.pixels, nsec, &cols, &res, &wpix);
     let cov = match (formal, arcs) {
         (Some(f), Some(a)) if a.trace() > f.trace() => a,
         (Some(f), _) => f,
@@ -831,7 +840,7 @@ pub(crate) fn refine(
     Some(Refined {
         outline: start.moved(&Vector3::new(x[0], x[1], x[2])),
         blur_px: x[3].max(0.0).sqrt(),
-        pixels: band.len(),
+        pixels: band.pixels.len(),
         sectors_used,
         rms: (c / wsum.max(1e-300)).sqrt(),
         std_px,
