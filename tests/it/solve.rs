@@ -828,9 +828,10 @@ fn a_photos_light_intensity_divides_its_radiance() {
 
 /// DiLiGenT's glossy ball as a whole solve (issue 34): 48 real photos, one light per photo, each
 /// photo's lamp intensity from the dataset's `light_intensities.txt`, radius 20 mm, no intrinsics.
-/// Checked: the fit converges, the lobe is fitted, σ0 is the small blur of an opaque ball, the
-/// solved lights against DiLiGenT's calibrated directions, and the residuals against the noise
-/// said in a note.
+/// Checked: the detector's lights against DiLiGenT's calibrated directions
+/// ([`super::detect::diligent_ball_lights`], on the detections.json this solve wrote), the fit
+/// converges, the lobe is fitted, σ0 is the small blur of an opaque ball, the solved lights
+/// against the calibrated directions, and the residuals against the noise said in a note.
 #[test]
 fn diligent_ball_whole_solve() {
     let Some(data) = common::shared_data() else {
@@ -839,6 +840,10 @@ fn diligent_ball_whole_solve() {
     let dir = tempfile::tempdir().unwrap();
     let (_, truth) = common::diligent_session_with(&data.join("diligent-ball"), dir.path(), true);
     let f = solve_with(dir.path(), "fit.json", |o| o.quiet = true);
+    let d: workbench::formats::detections::Detections =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detections.json")).unwrap())
+            .unwrap();
+    super::detect::diligent_ball_lights(&d, &truth);
     let errs: Vec<f64> = f
         .image_lights
         .iter()

@@ -56,8 +56,11 @@ pub fn fit_session(
         },
         fitted,
     );
+    let first_phases = first.phases.clone();
+    let t = Instant::now();
     let held = combine_lights(settings, measured, fitted, ext, first, notes);
     let (mut jf, settings) = (held.fit, held.settings);
+    jf.phases = combination_phases(first_phases, jf.phases, t.elapsed().as_secs_f64());
     jf.check_resolution(&setup, fitted);
     let jack = if settings.jackknife != JackknifeMethod::Off {
         let j = match settings.jackknife {
@@ -106,6 +109,29 @@ pub fn fit_session(
         std,
         light_fit,
     }
+}
+
+/// The solve's phases around the light's combination: the first fit's (`first`), then the
+/// combination's own seconds (the shading's light and the Newton steps of the held fit) as
+/// "light combination", and where the held fit was the whole fit repeated (its phases `last`
+/// are not the first's), those after it, named "held: …". `seconds`: the combination's in all.
+fn combination_phases(
+    first: Vec<(String, f64)>,
+    last: Vec<(String, f64)>,
+    seconds: f64,
+) -> Vec<(String, f64)> {
+    let repeated = last != first;
+    let repeat_s: f64 = if repeated {
+        last.iter().map(|p| p.1).sum()
+    } else {
+        0.0
+    };
+    let mut phases = first;
+    phases.push(("light combination".into(), (seconds - repeat_s).max(0.0)));
+    if repeated {
+        phases.extend(last.into_iter().map(|(n, s)| (format!("held: {n}"), s)));
+    }
+    phases
 }
 
 /// The extensions the settings choose, with the model choice and its seconds under `Auto`.
