@@ -221,3 +221,40 @@ fn stated_std(
             .hypot(jf.systematic[k])
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::combination_phases;
+
+    fn phases(v: &[(&str, f64)]) -> Vec<(String, f64)> {
+        v.iter().map(|(n, s)| (n.to_string(), *s)).collect()
+    }
+
+    /// A held fit by Newton steps keeps the first fit's phases: the combination's seconds follow
+    /// them; a repeated fit's phases follow as "held: …", the combination less their sum.
+    #[test]
+    fn the_phases_add_up_to_the_combination_and_the_repeat() {
+        let first = phases(&[("pool", 1.0), ("joint stage", 4.0)]);
+        let newton = combination_phases(first.clone(), first.clone(), 0.5);
+        assert_eq!(
+            newton,
+            phases(&[
+                ("pool", 1.0),
+                ("joint stage", 4.0),
+                ("light combination", 0.5)
+            ])
+        );
+        let repeat = phases(&[("pool", 1.5), ("joint stage", 6.0)]);
+        let repeated = combination_phases(first, repeat, 8.25);
+        assert_eq!(
+            repeated,
+            phases(&[
+                ("pool", 1.0),
+                ("joint stage", 4.0),
+                ("light combination", 0.75),
+                ("held: pool", 1.5),
+                ("held: joint stage", 6.0),
+            ])
+        );
+    }
+}
