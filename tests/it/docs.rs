@@ -100,17 +100,35 @@ fn missing(
         .collect()
 }
 
-/// `model::lanes` and `solve::run` name a source module (src/model/lanes.rs) or a function of
-/// one (`fn run` in src/solve/mod.rs), not tests.
+/// `model::lanes`, `solve::run` and `solver::fit_robust` name a source module (src/model/lanes.rs)
+/// or a function of one (`fn run` in src/solve/mod.rs, `fn fit_robust` in src/fit/solver.rs), not
+/// tests: the module is a folder or file of that name at any depth under src/.
 fn is_source_item(root: &Path) -> impl Fn(&str, &str) -> bool + '_ {
+    fn places(dir: &Path, m: &str, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                if p.file_name().is_some_and(|f| f == m) {
+                    out.push(p.clone());
+                }
+                places(&p, m, out);
+            } else if p.file_name().is_some_and(|f| *f == *format!("{m}.rs")) {
+                out.push(p);
+            }
+        }
+    }
     move |m, n| {
-        let dir = root.join("src").join(m);
         let defines =
             |p: PathBuf| std::fs::read_to_string(p).is_ok_and(|t| t.contains(&format!("fn {n}(")));
-        dir.join(format!("{n}.rs")).exists()
-            || dir.join(n).is_dir()
-            || defines(dir.join("mod.rs"))
-            || defines(root.join("src").join(format!("{m}.rs")))
+        let mut found = vec![];
+        places(&root.join("src"), m, &mut found);
+        found.into_iter().any(|p| {
+            if p.is_dir() {
+                p.join(format!("{n}.rs")).exists() || p.join(n).is_dir() || defines(p.join("mod.rs"))
+            } else {
+                defines(p)
+            }
+        })
     }
 }
 
@@ -159,4 +177,15 @@ fn the_name_finder_sees_names_filters_and_skips_paths() {
     // A source module of that name is not a test.
     let src = |m: &str, n: &str| m == "solve" && n == "two_lights";
     assert!(missing(text, &tests, &src).is_empty());
+}
+
+#[test]
+fn source_items_are_found_at_any_depth() {
+    let src = is_source_item(Path::new(env!("CARGO_MANIFEST_DIR")));
+    // src/fit/solver.rs's `fn fit_robust(`, src/model/sphere_atlas.rs, src/solve/mod.rs's `fn run(`.
+    assert!(src("solver", "fit_robust"));
+    assert!(src("model", "sphere_atlas"));
+    assert!(src("solve", "run"));
+    assert!(!src("solver", "no_such_function"));
+    assert!(!src("medium", "the_medium_of_the_soap_renders"));
 }
