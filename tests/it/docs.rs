@@ -124,7 +124,9 @@ fn is_source_item(root: &Path) -> impl Fn(&str, &str) -> bool + '_ {
         places(&root.join("src"), m, &mut found);
         found.into_iter().any(|p| {
             if p.is_dir() {
-                p.join(format!("{n}.rs")).exists() || p.join(n).is_dir() || defines(p.join("mod.rs"))
+                p.join(format!("{n}.rs")).exists()
+                    || p.join(n).is_dir()
+                    || defines(p.join("mod.rs"))
             } else {
                 defines(p)
             }
