@@ -1642,10 +1642,18 @@ fn the_renders_over_the_model_at_the_truth() {
     let dir = common::session_copy(&src);
     let t = truth(dir.path());
     let loaded = load_quiet(dir.path());
-    const BANDS: [f64; 10] = [
-        60.0, 70.0, 80.0, 85.0, 90.0, 95.0, 100.0, 105.0, 110.0, 120.0,
-    ];
-    println!("{name}: photos / model at the truth, θ bands {BANDS:?}");
+    // `BANDS=0,20,40` for other edges of θ (degrees); `BY=phi` bands the view angle φ instead.
+    let edges: Vec<f64> = std::env::var("BANDS").map_or_else(
+        |_| {
+            vec![
+                60.0, 70.0, 80.0, 85.0, 90.0, 95.0, 100.0, 105.0, 110.0, 120.0,
+            ]
+        },
+        |b| b.split(',').map(|v| v.trim().parse().unwrap()).collect(),
+    );
+    let by_phi = std::env::var("BY").is_ok_and(|b| b == "phi");
+    let (what, bands) = (if by_phi { "φ" } else { "θ" }, edges.as_slice());
+    println!("{name}: photos / model at the truth, {what} bands {bands:?}");
     for s in &loaded.spheres {
         let radius = Radius {
             radius_mm: s.radius_mm,
@@ -1665,10 +1673,11 @@ fn the_renders_over_the_model_at_the_truth() {
         };
         let predicted = predict_with(t.media, [t.irradiance; 3], t.alpha, &radius);
         for (c, (pixels, predicted)) in radius.pixels.iter().zip(&predicted).enumerate() {
-            let mut sums = [(0.0, 0.0); BANDS.len() - 1];
+            let mut sums = vec![(0.0, 0.0); bands.len() - 1];
             for (px, p) in pixels.iter().zip(predicted) {
-                let theta = px.cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
-                if let Some(b) = BANDS.windows(2).position(|w| (w[0]..w[1]).contains(&theta)) {
+                let cos = if by_phi { px.cos_phi } else { px.cos_theta };
+                let theta = cos.clamp(-1.0, 1.0).acos().to_degrees();
+                if let Some(b) = bands.windows(2).position(|w| (w[0]..w[1]).contains(&theta)) {
                     sums[b].0 += px.radiance;
                     sums[b].1 += p;
                 }
