@@ -215,6 +215,15 @@ pub struct PerChannelJson {
     pub std: [f64; 3],
 }
 
+/// The std per channel that the held light's error gives σa and σs′ (1/mm).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightStdJson {
+    #[serde(deserialize_with = "nullable::f64x3")]
+    pub sigma_a_per_mm: [f64; 3],
+    #[serde(deserialize_with = "nullable::f64x3")]
+    pub sigma_s_reduced_per_mm: [f64; 3],
+}
+
 /// One value and its standard error.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValueJson {
@@ -258,6 +267,10 @@ pub struct MediumJson {
     /// What `std` is: the formal or the larger of formal and jackknife, with the model's own
     /// error added.
     pub std_source: String,
+    /// The part of σa's and σs′'s std that the held light's error alone gives (included in
+    /// their `std`); absent where the light had no stated error, and in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_from_light: Option<LightStdJson>,
     /// The residuals' RMS over the pixels' noise.
     #[serde(deserialize_with = "nullable::f64")]
     pub residual_over_noise: f64,

@@ -6,10 +6,10 @@ use super::load::Loaded;
 use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
 use crate::error::{Error, Result};
-use crate::fit::medium::{self, MediumFit, Radius, Setup, MODEL_ERROR};
+use crate::fit::medium::{self, LightError, MediumFit, Radius, Setup, MODEL_ERROR};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{
-    EtaSourcesJson, MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson,
+    EtaSourcesJson, LightStdJson, MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson,
 };
 use crate::model::idx;
 
@@ -70,13 +70,63 @@ pub(super) fn run(
     }
     let t0 = std::time::Instant::now();
     let start = medium::start(&radii, &setup, m.sigma0_mm);
-    let mut f = medium::fit(&radii, &setup, &start);
+    let light = light_error(outcome, &fitted, &setup.light);
+    let mut f = medium::fit(&radii, &setup, &start, light.as_ref());
     // The start's scan and the held-out prediction count with the fit.
     let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
     Some(json(&f, holdout, given_by))
+}
+
+/// The step (rad) the light is moved by for the medium's sensitivity to it: small beside the
+/// atlas's half-degree nodes' curvature, large beside rounding.
+const LIGHT_STEP: f64 = 1e-3;
+
+/// The joint fit's light error for the medium fit: its pixels under the light moved along the
+/// azimuth and the elevation, and the two angles' covariance from the joint fit's stated std and
+/// correlation. None where the joint fit states no error for the light (held without one, or
+/// not determined).
+fn light_error(
+    outcome: &Outcome,
+    fitted: &[&SphereData],
+    light: &nalgebra::Vector3<f64>,
+) -> Option<LightError> {
+    let (a, e) = (idx::AZIMUTH, idx::ELEVATION);
+    let (sa, se) = (outcome.std[a], outcome.std[e]);
+    if !(sa.is_finite() && se.is_finite() && sa > 0.0 && se > 0.0) {
+        return None;
+    }
+    // The correlation is over the free parameters, in their order; a light combined from the
+    // highlights' and the shading's estimates (not free in the last fit) has none.
+    let at = |k: usize| (0..k).filter(|&j| outcome.free[j]).count();
+    let c = &outcome.correlation;
+    let both_free = outcome.free[a] && outcome.free[e];
+    let rho = if both_free && c.nrows() == outcome.free.iter().filter(|f| **f).count() {
+        c[(at(a), at(e))]
+    } else {
+        0.0
+    };
+    let rho = if rho.is_finite() { rho } else { 0.0 };
+    let angles = outcome.params.light;
+    let moved = |k: usize, sign: f64| {
+        let mut m = angles;
+        if k == 0 {
+            m.azimuth += sign * LIGHT_STEP;
+        } else {
+            m.elevation += sign * LIGHT_STEP;
+        }
+        medium::pixels_seen(fitted, light, &m.direction())
+    };
+    Some(LightError {
+        moved: [
+            [moved(0, 1.0), moved(0, -1.0)],
+            [moved(1, 1.0), moved(1, -1.0)],
+        ],
+        step: LIGHT_STEP,
+        covariance: nalgebra::Matrix2::new(sa * sa, rho * sa * se, rho * sa * se, se * se),
+    })
 }
 
 /// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.
@@ -185,7 +235,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             "fitted with the medium (no --irradiance)".into()
         },
         std_source: format!(
-            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′",
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′{}",
             if f.std_jackknife.is_some() {
                 "larger of formal and jackknife"
             } else {
@@ -194,8 +244,17 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             100.0 * MODEL_ERROR.sigma_a,
             100.0 * MODEL_ERROR.sigma_s_reduced,
             f.residual_over_noise.max(1.0),
-            MODEL_ERROR.eta
+            MODEL_ERROR.eta,
+            if f.std_light.is_some() {
+                "; the held light's error (the joint fit's) carried into them by their sensitivity to its two angles"
+            } else {
+                "; the light held without a stated error, so none of it is carried"
+            }
         ),
+        std_from_light: f.std_light.as_ref().map(|s| LightStdJson {
+            sigma_a_per_mm: std::array::from_fn(|c| f.media[c].sigma_a * s[c]),
+            sigma_s_reduced_per_mm: std::array::from_fn(|c| f.media[c].sigma_s_reduced * s[3 + c]),
+        }),
         residual_over_noise: f.residual_over_noise,
         pixels: f.pixels,
         radii_mm: f.radii.clone(),

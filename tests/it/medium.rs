@@ -1697,3 +1697,87 @@ fn the_renders_over_the_model_at_the_truth() {
         }
     }
 }
+
+/// The medium's first-order sensitivity to the held light (what carries the light's stated
+/// error into σa and σs′: `fit::medium::LightError`) against the fit itself rerun with the
+/// light moved: on the soap renders, with the truth's light, η, roughness and irradiance, the
+/// light moved by 0.3° in azimuth and then in elevation, every σa and σs′ moves as the
+/// sensitivities to the light and to η (the refit's η moves a little with the pixels' η) say.
+/// Also: the light's std is in the stated covariance.
+#[test]
+fn the_light_sensitivity_follows_refits() {
+    use workbench::fit::medium::{fit, pixels, pixels_seen, start, LightError, Setup};
+    use workbench::model::LightAngles;
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
+    let dir = common::session_copy(&src);
+    let t = truth(dir.path());
+    let loaded = load_quiet(dir.path());
+    let spheres: Vec<_> = loaded.spheres.iter().collect();
+    let angles = LightAngles::from_direction(&t.light);
+    let l = angles.direction();
+    let setup = Setup {
+        light: l,
+        eta_prior: (t.media[0].eta, 0.02),
+        alpha: t.alpha,
+        irradiance: Some(t.irradiance),
+        largest_radius: 35.0,
+    };
+    let moved = |da: f64, de: f64| {
+        let mut m = angles;
+        m.azimuth += da;
+        m.elevation += de;
+        pixels_seen(&spheres, &l, &m.direction())
+    };
+    let (step, std) = (1e-3, 0.3f64.to_radians());
+    let light = LightError {
+        moved: [
+            [moved(step, 0.0), moved(-step, 0.0)],
+            [moved(0.0, step), moved(0.0, -step)],
+        ],
+        step,
+        covariance: nalgebra::Matrix2::identity() * std * std,
+    };
+    let radii = pixels(&spheres, &l);
+    let sigma0 = t
+        .media
+        .map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt());
+    let f0 = fit(&radii, &setup, &start(&radii, &setup, sigma0), Some(&light));
+    let without = fit(&radii, &setup, f0.u.as_slice(), None);
+    let s = f0
+        .light_sensitivity
+        .clone()
+        .expect("the light's sensitivity");
+    let std_light = f0.std_light.clone().expect("the light's std");
+    let mut worst: f64 = 0.0;
+    for (k, (da, de)) in [(std, 0.0), (0.0, std)].into_iter().enumerate() {
+        let f1 = fit(&moved(da, de), &setup, f0.u.as_slice(), None);
+        let d_eta = f1.u[6] - f0.u[6];
+        println!(
+            "angle {k}: η {:.5} → {:.5}",
+            f0.media[0].eta, f1.media[0].eta
+        );
+        for i in 0..6 {
+            let refit = f1.u[i] - f0.u[i];
+            let said = s[k][i] * std + f0.eta_sensitivity[i] * d_eta;
+            println!("angle {k}, u[{i}]: refit {refit:+.5}, sensitivity {said:+.5}");
+            worst = worst.max((refit - said).abs() / said.abs().max(0.01));
+        }
+    }
+    println!("worst |refit − first order| over max(|first order|, 0.01): {worst:.3}");
+    // Measured 0.016 (2026-12-06).
+    assert!(worst < 0.05, "{worst}");
+    // The light's part is in the stated variance: it adds std_light² to what the fit without
+    // the light states.
+    for i in 0..6 {
+        let added = f0.covariance[(i, i)] - without.covariance[(i, i)];
+        println!(
+            "u[{i}]: light's variance {:.3e}, added {added:.3e}",
+            std_light[i].powi(2)
+        );
+        assert!(
+            (added - std_light[i].powi(2)).abs() <= 1e-3 * std_light[i].powi(2) + 1e-12,
+            "u[{i}]: {added} against {}",
+            std_light[i].powi(2)
+        );
+    }
+}

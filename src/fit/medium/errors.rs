@@ -114,19 +114,57 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
 /// The others' sensitivity to η over the pixels' rows `..m` of `jac`: −(J_fᵀJ_f)⁻¹J_fᵀ j_η,
 /// J_f the other columns (a parameter the data do not move: 0); 0 at η's index.
 fn sensitivity_to_eta(jac: &DMatrix<f64>, m: usize) -> DVector<f64> {
+    let je = jac.view((0, ETA), (m, 1)).into_owned();
+    sensitivity(jac, m, &je)
+}
+
+/// The first-order change of every parameter but η (held) when the pixels' residuals change by
+/// `dr` (rows `..m` of `jac`) and the fit follows: −(J_fᵀJ_f)⁻¹J_fᵀ dr, J_f the columns other
+/// than η's (a parameter the data do not move: 0); 0 at η's index.
+fn sensitivity(jac: &DMatrix<f64>, m: usize, dr: &DMatrix<f64>) -> DVector<f64> {
     let n = jac.ncols();
     let others: Vec<usize> = (0..n).filter(|&k| k != ETA).collect();
     let jf = DMatrix::from_fn(m, others.len(), |i, k| jac[(i, others[k])]);
-    let je = jac.view((0, ETA), (m, 1)).into_owned();
     let inv =
         inverse_of_the_determined(&(jf.transpose() * &jf))
             .map(|v| if v.is_nan() { 0.0 } else { v });
-    let s = -(inv * (jf.transpose() * je));
+    let s = -(inv * (jf.transpose() * dr));
     let mut out = DVector::zeros(n);
     for (a, &i) in others.iter().enumerate() {
         out[i] = s[a];
     }
     out
+}
+
+/// The held light's error carried into the others (η held, as in the second stage): `moved`
+/// are the pixels' residuals (rows `..m`, as `problem`'s) under the light moved by ± `step`
+/// rad along each of its two angles, `light_cov` those angles' covariance (rad²). Adds
+/// S Σ Sᵀ to `covariance`, S the parameters' sensitivities to the two angles, and returns S's
+/// columns.
+pub(super) fn carry_light(
+    covariance: &mut DMatrix<f64>,
+    problem: &Problem,
+    moved: &[[DVector<f64>; 2]; 2],
+    step: f64,
+    light_cov: &nalgebra::Matrix2<f64>,
+) -> Option<[DVector<f64>; 2]> {
+    let mut jac = problem.jacobian_with(true)?;
+    let m = problem.pixel_rows();
+    jac.row_mut(m + 1).fill(0.0);
+    let s: [DVector<f64>; 2] = std::array::from_fn(|k| {
+        let [plus, minus] = &moved[k];
+        let dr = DMatrix::from_fn(m, 1, |i, _| (plus[i] - minus[i]) / (2.0 * step));
+        sensitivity(&jac, m, &dr)
+    });
+    if s.iter().any(|v| v.iter().any(|x| !x.is_finite())) {
+        return None;
+    }
+    for a in 0..2 {
+        for b in 0..2 {
+            *covariance += &s[a] * s[b].transpose() * light_cov[(a, b)];
+        }
+    }
+    Some(s)
 }
 
 /// η held at a value of std `std_u` (in u = ln(η − 1)): its row and column of the covariance

@@ -14,6 +14,10 @@
 //! more a leave-one-radius-out jackknife by one Gauss–Newton step from the fit (widened for its
 //! few estimates, [`crate::stats::jackknife_widening`]); each parameter's std is the larger, and
 //! the model's own error measured on physically based renders ([`MODEL_ERROR`]) is added to it.
+//! The light is held, but its error is not dropped: given the pixels under the light moved along
+//! its two angles ([`LightError`]), it is carried into σa, σs′ (and E) by their sensitivity, as
+//! η's is (docs/medium.md, "Jade: not the outlines, not the light's place, but the light's
+//! error").
 
 mod derived;
 mod errors;
@@ -22,14 +26,15 @@ mod problem;
 
 use crate::model::dipole::Medium;
 use crate::model::sphere_atlas::SphereAtlas;
-use levenberg_marquardt::LevenbergMarquardt;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector};
 use problem::{physical, predicted, profiles, Problem, ETA};
 use std::time::Instant;
 
 pub use derived::{Derived, PerChannel};
 pub use errors::{ModelError, MODEL_ERROR};
-pub use pixels::{described, fitted, fitted_obs, pixels, Px, Radius, Setup};
+pub use pixels::{described, fitted, fitted_obs, pixels, pixels_seen, Px, Radius, Setup};
 
 /// The medium fit's result.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,7 +64,26 @@ pub struct MediumFit {
     pub at_bounds: Vec<String>,
     /// Where η came from: the joint fit's and the pixels' (first stage) estimates.
     pub eta_sources: EtaSources,
+    /// The held light's error, when it was carried: per u, the first-order change with the
+    /// light's azimuth and elevation (per radian; 0 at η, which is held), and the std that error
+    /// alone gives.
+    pub light_sensitivity: Option<[DVector<f64>; 2]>,
+    /// Per u, the first-order change with ln(η − 1) when η is moved and the pixels refitted (0
+    /// at η): what carries η's error into σa and σs′.
+    pub eta_sensitivity: DVector<f64>,
+    pub std_light: Option<Vec<f64>>,
     pub seconds: f64,
+}
+
+/// The held light's error, for the medium's: the fit's pixels ([`pixels_seen`], same pixels,
+/// same order) with the light moved by +`step` and −`step` rad along each of its two angles
+/// (`moved[k] = [plus, minus]`: k 0 the azimuth, 1 the elevation), and the two angles'
+/// covariance (rad²) as the joint fit states it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightError {
+    pub moved: [[Vec<Radius>; 2]; 2],
+    pub step: f64,
+    pub covariance: nalgebra::Matrix2<f64>,
 }
 
 /// The two estimates of η the fit combines, each (value, std).
@@ -171,8 +195,14 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 /// physically based wax and soap renders, where the joint fit's η is within 0.03), so their
 /// say on η is capped at the model's error; where the joint fit leaves η undetermined (jade's
 /// lobe: ± 0.07–0.4) the pixels' η prevails. η's stated error is the combination's, and it is
-/// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit").
-pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
+/// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit"), and so
+/// is the held light's error, given `light`.
+pub fn fit(
+    radii: &[Radius],
+    setup: &Setup,
+    start: &[f64],
+    light: Option<&LightError>,
+) -> MediumFit {
     let t0 = Instant::now();
     let atlas = SphereAtlas::new(setup.alpha);
     let free = solve(
@@ -205,7 +235,9 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
     u[ETA] = (eta.0 - 1.0).ln();
     let (problem, report) = solve(radii, &held_setup, &atlas, u, true);
     let p = physical(problem.u.as_slice(), setup);
-    let errors = errors::of(&problem, Some(eta.1));
+    let mut errors = errors::of(&problem, Some(eta.1));
+    let carried = light.and_then(|le| carry_light(&mut errors.covariance, &problem, le));
+    let (light_sensitivity, std_light) = carried.unzip();
     let profiles = atlas.computed();
     MediumFit {
         media: p.media,
@@ -229,8 +261,48 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64]) -> MediumFit {
             joint,
             pixels: (eta_px, eta_px_std),
         },
+        light_sensitivity,
+        eta_sensitivity: errors.eta_sensitivity.clone(),
+        std_light,
         seconds: t0.elapsed().as_secs_f64(),
     }
+}
+
+/// The held light's error carried into `covariance` (the fit ended at `problem`): the
+/// sensitivities to the light's two angles and, per u, the std the light alone gives. None
+/// where the moved pixels are not the fit's or do not evaluate.
+fn carry_light(
+    covariance: &mut DMatrix<f64>,
+    problem: &Problem,
+    le: &LightError,
+) -> Option<([DVector<f64>; 2], Vec<f64>)> {
+    let same = |moved: &[Radius]| {
+        moved.len() == problem.radii.len()
+            && moved.iter().zip(problem.radii).all(|(a, b)| {
+                a.radius_mm == b.radius_mm && (0..3).all(|c| a.pixels[c].len() == b.pixels[c].len())
+            })
+    };
+    let mut moved: [[DVector<f64>; 2]; 2] = Default::default();
+    for (k, pair) in le.moved.iter().enumerate() {
+        for (s, radii) in pair.iter().enumerate() {
+            if !same(radii) {
+                return None;
+            }
+            let at = Problem::new(radii, problem.setup, problem.atlas, problem.u.clone(), true);
+            moved[k][s] = at.residuals()?;
+        }
+    }
+    let s = errors::carry_light(covariance, problem, &moved, le.step, &le.covariance)?;
+    let var = |i: usize| {
+        (0..2)
+            .flat_map(|a| (0..2).map(move |b| (a, b)))
+            .map(|(a, b)| s[a][i] * s[b][i] * le.covariance[(a, b)])
+            .sum::<f64>()
+    };
+    let std = (0..problem.u.len())
+        .map(|i| var(i).max(0.0).sqrt())
+        .collect();
+    Some((s, std))
 }
 
 /// The joint fit's own error on η, added in quadrature to its stated std where the two are

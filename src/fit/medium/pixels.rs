@@ -87,6 +87,16 @@ pub const MAX_THETA_DEG: f64 = 105.0;
 
 /// The spheres' fitted pixels, pooled by radius (in increasing radius).
 pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
+    pixels_seen(spheres, light, light)
+}
+
+/// The pixels [`pixels`] chooses under `light`, their cosines taken under `seen`: the same
+/// pixels in the same order under a moved light (the fit's sensitivity to the light).
+pub fn pixels_seen(
+    spheres: &[&SphereData],
+    light: &Vector3<f64>,
+    seen: &Vector3<f64>,
+) -> Vec<Radius> {
     let mut radii: Vec<Radius> = Vec::new();
     for s in spheres {
         let at = match radii
@@ -109,7 +119,7 @@ pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
             }
             for c in 0..3 {
                 if o.weight[c] > 0.0 {
-                    radii[at].pixels[c].push(Px::at(&n, &v, light, o.radiance[c], o.weight[c]));
+                    radii[at].pixels[c].push(Px::at(&n, &v, seen, o.radiance[c], o.weight[c]));
                 }
             }
         }

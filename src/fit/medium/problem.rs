@@ -210,7 +210,7 @@ pub(super) struct Problem<'a> {
     pub(super) radii: &'a [Radius],
     pub(super) setup: &'a Setup,
     pub(super) u: DVector<f64>,
-    atlas: &'a SphereAtlas,
+    pub(super) atlas: &'a SphereAtlas,
     tables: AtlasProfiles,
     law: ExitLaw,
     /// η is held by its prior (the second stage): the solver's Jacobian leaves η's pixel rows
