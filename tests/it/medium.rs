@@ -991,9 +991,11 @@ fn the_medium_fit_is_drawn(fit: &Path) {
 /// model does not describe: the output must say so, and its errors must be widened toward the
 /// truth. All five radii fitted, the residuals are 1.90 times the noise, so the misfit note is
 /// there (its threshold 1.5). With the model's error scaled by the misfit the worst of σa and
-/// σs′ is 2.11 of its stated std (2.61 with Snell's beams and the deepest shadow fitted);
-/// unscaled it was 4.67.
-/// Asserted 3.5: short of covering, and said so in docs/medium.md.
+/// σs′ was 2.11 of its stated std (2.61 with Snell's beams and the deepest shadow fitted;
+/// unscaled 4.67); with the held light's error carried into them (2026-12-06), 1.40 (σs′_r,
+/// 33% low, the light alone ± 23%). Asserted within 1.5, the coverage docs/uncertainty.md
+/// asks of the medium's errors (η, not asserted here, is 2.07 of its std: the light's error
+/// does not reach it, since it is held).
 #[test]
 fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-3");
@@ -1021,7 +1023,7 @@ fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
         "residuals {:.2}× the noise, worst error {worst:.2} std",
         m.residual_over_noise
     );
-    assert!(worst < 3.5, "{worst}");
+    assert!(worst < 1.5, "{worst}");
     mitsuba_reads_and_renders_the_export(&dir.path().join("fit.json"), m);
 }
 

@@ -1,5 +1,6 @@
 //! The medium fit's stated errors: the formal σ²(JᵀJ)⁻¹, a leave-one-radius-out jackknife by one
-//! Gauss–Newton step from the fit, and what follows for the quantities a renderer takes (the
+//! Gauss–Newton step from the fit, the held η's and the held light's errors carried in by the
+//! others' sensitivity to them, and what follows for the quantities a renderer takes (the
 //! transport mean free path, the surface's diffuse albedo), by their gradients in u.
 
 use super::problem::{Problem, ETA};
