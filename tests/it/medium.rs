@@ -1758,9 +1758,9 @@ fn the_light_sensitivity_follows_refits() {
             "angle {k}: η {:.5} → {:.5}",
             f0.media[0].eta, f1.media[0].eta
         );
-        for i in 0..6 {
+        for (i, (s, e)) in s[k].iter().zip(&f0.eta_sensitivity).take(6).enumerate() {
             let refit = f1.u[i] - f0.u[i];
-            let said = s[k][i] * std + f0.eta_sensitivity[i] * d_eta;
+            let said = s * std + e * d_eta;
             println!("angle {k}, u[{i}]: refit {refit:+.5}, sensitivity {said:+.5}");
             worst = worst.max((refit - said).abs() / said.abs().max(0.01));
         }
@@ -1770,16 +1770,12 @@ fn the_light_sensitivity_follows_refits() {
     assert!(worst < 0.05, "{worst}");
     // The light's part is in the stated variance: it adds std_light² to what the fit without
     // the light states.
-    for i in 0..6 {
-        let added = f0.covariance[(i, i)] - without.covariance[(i, i)];
-        println!(
-            "u[{i}]: light's variance {:.3e}, added {added:.3e}",
-            std_light[i].powi(2)
-        );
+    for (i, sl) in std_light.iter().take(6).enumerate() {
+        let (added, var) = (f0.covariance[(i, i)] - without.covariance[(i, i)], sl * sl);
+        println!("u[{i}]: light's variance {var:.3e}, added {added:.3e}");
         assert!(
-            (added - std_light[i].powi(2)).abs() <= 1e-3 * std_light[i].powi(2) + 1e-12,
-            "u[{i}]: {added} against {}",
-            std_light[i].powi(2)
+            (added - var).abs() <= 1e-3 * var + 1e-12,
+            "u[{i}]: {added} against {var}"
         );
     }
 }
