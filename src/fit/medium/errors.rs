@@ -160,11 +160,9 @@ pub(super) fn carry_light(
     if s.iter().any(|v| v.iter().any(|x| !x.is_finite())) {
         return None;
     }
-    for a in 0..2 {
-        for b in 0..2 {
-            *covariance += &s[a] * s[b].transpose() * light_cov[(a, b)];
-        }
-    }
+    let sm = DMatrix::from_columns(&s);
+    let sigma = DMatrix::from_fn(2, 2, |a, b| light_cov[(a, b)]);
+    *covariance += &sm * sigma * sm.transpose();
     Some(s)
 }
 

@@ -26,7 +26,6 @@ mod problem;
 
 use crate::model::dipole::Medium;
 use crate::model::sphere_atlas::SphereAtlas;
-
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector};
 use problem::{physical, predicted, profiles, Problem, ETA};
@@ -64,14 +63,14 @@ pub struct MediumFit {
     pub at_bounds: Vec<String>,
     /// Where η came from: the joint fit's and the pixels' (first stage) estimates.
     pub eta_sources: EtaSources,
-    /// The held light's error, when it was carried: per u, the first-order change with the
-    /// light's azimuth and elevation (per radian; 0 at η, which is held), and the std that error
-    /// alone gives.
+    /// Per u, the first-order change with the light's azimuth and elevation (per radian; 0 at
+    /// η, which is held), when the light's error was carried ([`LightError`]).
     pub light_sensitivity: Option<[DVector<f64>; 2]>,
+    /// Per u, the std the light's error alone gives (already in `covariance`).
+    pub std_light: Option<Vec<f64>>,
     /// Per u, the first-order change with ln(η − 1) when η is moved and the pixels refitted (0
     /// at η): what carries η's error into σa and σs′.
     pub eta_sensitivity: DVector<f64>,
-    pub std_light: Option<Vec<f64>>,
     pub seconds: f64,
 }
 
@@ -293,14 +292,11 @@ fn carry_light(
         }
     }
     let s = errors::carry_light(covariance, problem, &moved, le.step, &le.covariance)?;
-    let var = |i: usize| {
-        (0..2)
-            .flat_map(|a| (0..2).map(move |b| (a, b)))
-            .map(|(a, b)| s[a][i] * s[b][i] * le.covariance[(a, b)])
-            .sum::<f64>()
-    };
     let std = (0..problem.u.len())
-        .map(|i| var(i).max(0.0).sqrt())
+        .map(|i| {
+            let si = nalgebra::Vector2::new(s[0][i], s[1][i]);
+            si.dot(&(le.covariance * si)).max(0.0).sqrt()
+        })
         .collect();
     Some((s, std))
 }
