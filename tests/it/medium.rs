@@ -1625,6 +1625,36 @@ fn the_exit_follows_the_flux_along_the_surface() {
     }
 }
 
+/// Rewrite `dir`'s detections.json with each photo's sphere where truth.json puts it: the
+/// outline's cone axis toward the centre, its half angle asin(R/|c|).
+fn truth_outlines(dir: &Path) {
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
+    };
+    let (mut det, t) = (read("detections.json"), read("truth.json"));
+    for im in det["images"].as_array_mut().unwrap() {
+        let file = im["file"].as_str().unwrap().to_string();
+        let truth = t["images"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|i| i["file"] == file.as_str())
+            .expect("the photo in truth.json");
+        let c = Vector3::from_fn(|i, _| truth["centre_mm"][i].as_f64().unwrap());
+        let s = &mut im["spheres"][0];
+        let r = s["radius_mm"].as_f64().unwrap();
+        let axis = c.normalize();
+        s["outline"]["axis"] = serde_json::json!([axis.x, axis.y, axis.z]);
+        s["outline"]["half_angle_deg"] = serde_json::json!((r / c.norm()).asin().to_degrees());
+        s["center_mm"] = serde_json::json!([c.x, c.y, c.z]);
+    }
+    std::fs::write(
+        dir.join("detections.json"),
+        serde_json::to_string_pretty(&det).unwrap(),
+    )
+    .unwrap();
+}
+
 /// The photos over the medium fit's model at the truth (its medium, η, roughness, light and
 /// irradiance), per band of θ past the lit side, every sphere and channel of a physically based
 /// session (`SESSION`, default `pbr-wax`; `datasets/` or `datasets/pbr-seeds/`), every pixel off
@@ -1642,6 +1672,12 @@ fn the_renders_over_the_model_at_the_truth() {
         .find(|p| p.join("truth.json").exists())
         .expect("a session with truth.json");
     let dir = common::session_copy(&src);
+    // `TRUTH_OUTLINES=1`: every sphere's outline replaced by the truth's (its centre from
+    // truth.json), so the geometry is not the detector's.
+    if std::env::var("TRUTH_OUTLINES").is_ok_and(|v| v == "1") {
+        load_quiet(dir.path());
+        truth_outlines(dir.path());
+    }
     let t = truth(dir.path());
     let loaded = load_quiet(dir.path());
     // `BANDS=0,20,40` for other edges of θ (degrees); `BY=phi` bands the view angle φ instead.
