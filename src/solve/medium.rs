@@ -70,7 +70,7 @@ pub(super) fn run(
     }
     let t0 = std::time::Instant::now();
     let start = medium::start(&radii, &setup, m.sigma0_mm);
-    let light = light_error(outcome, &fitted, &setup.light);
+    let light = light_error(outcome, &fitted);
     let mut f = medium::fit(&radii, &setup, &start, light.as_ref());
     // The start's scan and the held-out prediction count with the fit.
     let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
@@ -88,11 +88,7 @@ const LIGHT_STEP: f64 = 1e-3;
 /// azimuth and the elevation, and the two angles' covariance from the joint fit's stated std and
 /// correlation. None where the joint fit states no error for the light (held without one, or
 /// not determined).
-fn light_error(
-    outcome: &Outcome,
-    fitted: &[&SphereData],
-    light: &nalgebra::Vector3<f64>,
-) -> Option<LightError> {
+fn light_error(outcome: &Outcome, fitted: &[&SphereData]) -> Option<LightError> {
     let (a, e) = (idx::AZIMUTH, idx::ELEVATION);
     let (sa, se) = (outcome.std[a], outcome.std[e]);
     if !(sa.is_finite() && se.is_finite() && sa > 0.0 && se > 0.0) {
@@ -109,24 +105,12 @@ fn light_error(
         0.0
     };
     let rho = if rho.is_finite() { rho } else { 0.0 };
-    let angles = outcome.params.light;
-    let moved = |k: usize, sign: f64| {
-        let mut m = angles;
-        if k == 0 {
-            m.azimuth += sign * LIGHT_STEP;
-        } else {
-            m.elevation += sign * LIGHT_STEP;
-        }
-        medium::pixels_seen(fitted, light, &m.direction())
-    };
-    Some(LightError {
-        moved: [
-            [moved(0, 1.0), moved(0, -1.0)],
-            [moved(1, 1.0), moved(1, -1.0)],
-        ],
-        step: LIGHT_STEP,
-        covariance: nalgebra::Matrix2::new(sa * sa, rho * sa * se, rho * sa * se, se * se),
-    })
+    Some(LightError::around(
+        fitted,
+        outcome.params.light,
+        LIGHT_STEP,
+        nalgebra::Matrix2::new(sa * sa, rho * sa * se, rho * sa * se, se * se),
+    ))
 }
 
 /// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.

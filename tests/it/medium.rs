@@ -1766,15 +1766,13 @@ fn the_light_sensitivity_follows_refits() {
         m.elevation += de;
         pixels_seen(&spheres, &l, &m.direction())
     };
-    let (step, std) = (1e-3, 0.3f64.to_radians());
-    let light = LightError {
-        moved: [
-            [moved(step, 0.0), moved(-step, 0.0)],
-            [moved(0.0, step), moved(0.0, -step)],
-        ],
-        step,
-        covariance: nalgebra::Matrix2::identity() * std * std,
-    };
+    let std = 0.3f64.to_radians();
+    let light = LightError::around(
+        &spheres,
+        angles,
+        1e-3,
+        nalgebra::Matrix2::identity() * std * std,
+    );
     let radii = pixels(&spheres, &l);
     let sigma0 = t
         .media

@@ -24,8 +24,10 @@ mod errors;
 mod pixels;
 mod problem;
 
+use crate::fit::observe::SphereData;
 use crate::model::dipole::Medium;
 use crate::model::sphere_atlas::SphereAtlas;
+use crate::model::LightAngles;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector};
 use problem::{physical, predicted, profiles, Problem, ETA};
@@ -83,6 +85,34 @@ pub struct LightError {
     pub moved: [[Vec<Radius>; 2]; 2],
     pub step: f64,
     pub covariance: nalgebra::Matrix2<f64>,
+}
+
+impl LightError {
+    /// The spheres' fitted pixels under the light of `angles` ([`pixels`]), seen under it moved
+    /// by ± `step` rad along its azimuth and its elevation, with the angles' `covariance`.
+    pub fn around(
+        spheres: &[&SphereData],
+        angles: LightAngles,
+        step: f64,
+        covariance: nalgebra::Matrix2<f64>,
+    ) -> LightError {
+        let light = angles.direction();
+        let moved = |da: f64, de: f64| {
+            let m = LightAngles {
+                azimuth: angles.azimuth + da,
+                elevation: angles.elevation + de,
+            };
+            pixels_seen(spheres, &light, &m.direction())
+        };
+        LightError {
+            moved: [
+                [moved(step, 0.0), moved(-step, 0.0)],
+                [moved(0.0, step), moved(0.0, -step)],
+            ],
+            step,
+            covariance,
+        }
+    }
 }
 
 /// The two estimates of η the fit combines, each (value, std).
