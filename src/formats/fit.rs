@@ -246,9 +246,16 @@ pub struct EtaSourcesJson {
 pub struct MediumJson {
     /// The model that predicted the pixels (docs/medium.md).
     pub profile: String,
-    /// The boundary's GGX roughness (the joint fit's lobe; 0: smooth), carried into exports.
+    /// The boundary's GGX roughness, carried into exports: measured by the medium fit with
+    /// the joint fit's lobe as its prior, or held at the lobe's (0: smooth).
     #[serde(deserialize_with = "nullable::f64")]
     pub alpha: f64,
+    /// α's std where the medium fit measured it; absent where α was held, and in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_std: Option<f64>,
+    /// The lobe's α and its std (the joint fit's), the prior of the measured α.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_lobe: Option<ValueJson>,
     pub sigma_a_per_mm: PerChannelJson,
     pub sigma_s_reduced_per_mm: PerChannelJson,
     pub eta: ValueJson,

@@ -60,6 +60,7 @@ pub(super) fn run(
         } else {
             0.0
         },
+        alpha_std: alpha_prior_std(outcome),
         irradiance: opts.fit.irradiance,
         largest_radius: fitted.iter().map(|s| s.radius_mm).fold(1.0, f64::max),
     };
@@ -77,7 +78,15 @@ pub(super) fn run(
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
-    Some(json(&f, holdout, given_by))
+    Some(json(&f, &setup, holdout, given_by))
+}
+
+/// The std of the lobe's α as the medium fit's prior on the boundary's roughness, which the
+/// fit then measures from the terminator and the level; None (α held at the lobe's) where the
+/// joint fit has no lobe or states no error for its α.
+fn alpha_prior_std(outcome: &Outcome) -> Option<f64> {
+    let s = outcome.std[idx::ALPHA];
+    (outcome.specular && s.is_finite() && s > 0.0).then_some(s)
 }
 
 /// The step (rad) the light is moved by for the medium's sensitivity to it: small beside the
@@ -194,7 +203,12 @@ fn value((value, std): (f64, f64)) -> ValueJson {
 }
 
 /// fit.json's medium; `given_by` says where a given irradiance came from.
-fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> MediumJson {
+fn json(
+    f: &MediumFit,
+    setup: &Setup,
+    holdout: Option<MediumHoldoutJson>,
+    given_by: &str,
+) -> MediumJson {
     let d = f.derived();
     let per = |p: medium::PerChannel| PerChannelJson {
         value: p.value,
@@ -203,6 +217,11 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
     MediumJson {
         profile: PROFILE.into(),
         alpha: f.alpha,
+        alpha_std: f.alpha_std,
+        alpha_lobe: setup.alpha_std.map(|std| ValueJson {
+            value: setup.alpha,
+            std,
+        }),
         sigma_a_per_mm: per(d.sigma_a),
         sigma_s_reduced_per_mm: per(d.sigma_s_reduced),
         eta: value(d.eta),

@@ -267,7 +267,7 @@ fn the_fit_profile_against_the_photon_tally() {
                 .map(|&(radius, eta)| {
                     let t = tally((radius, sigma_t, albedo, eta, alpha), 1_000_000, 1);
                     let m = Medium::isotropic(sigma_t, albedo, eta);
-                    let profile = atlas.profile(&Coordinates::of(&m, radius));
+                    let profile = atlas.profile(&Coordinates::of(&m, radius, alpha));
                     let ratio = |(lo, hi): (usize, usize)| {
                         t.exitance(lo, hi).value / band_mean_of(|c| profile.value.at(c), lo, hi)
                     };
@@ -1757,6 +1757,7 @@ fn the_light_sensitivity_follows_refits() {
         light: l,
         eta_prior: (t.media[0].eta, 0.02),
         alpha: t.alpha,
+        alpha_std: None,
         irradiance: Some(t.irradiance),
         largest_radius: 35.0,
     };
@@ -1840,13 +1841,19 @@ fn the_fit_from_the_truths_inputs() {
         .iter()
         .filter(|s| s.radius_mm > 16.0)
         .collect();
+    // ALPHA=value holds α there; ALPHA=value:std makes it the prior of α the fit measures.
+    let alpha = std::env::var("ALPHA").map_or((t.alpha, None), |v| match v.split_once(':') {
+        Some((a, b)) => (a.parse().unwrap(), Some(b.parse().unwrap())),
+        None => (v.parse().unwrap(), None),
+    });
     let setup = Setup {
         light: t.light,
         eta_prior: std::env::var("ETA").map_or((t.media[0].eta, 0.02), |v| {
             let (a, b) = v.split_once(':').expect("ETA=value:std");
             (a.parse().unwrap(), b.parse().unwrap())
         }),
-        alpha: std::env::var("ALPHA").map_or(t.alpha, |v| v.parse().unwrap()),
+        alpha: alpha.0,
+        alpha_std: alpha.1,
         irradiance: Some(t.irradiance),
         largest_radius: 35.0,
     };
@@ -1854,6 +1861,7 @@ fn the_fit_from_the_truths_inputs() {
     let mut truth_u: Vec<f64> = t.media.iter().map(|m| m.sigma_a.ln()).collect();
     truth_u.extend(t.media.iter().map(|m| m.sigma_s_reduced.ln()));
     truth_u.push((t.media[0].eta - 1.0).ln());
+    truth_u.push(t.alpha.ln());
     let sigma0 = t
         .media
         .map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt());
@@ -1875,11 +1883,15 @@ fn the_fit_from_the_truths_inputs() {
     ] {
         let f = fit(&radii, &setup, &u0, None);
         println!(
-            "from {what}: σa {:?}%, σs′ {:?}%, η {:.3}, residuals {:.2}× the noise",
+            "from {what}: σa {:?}%, σs′ {:?}%, η {:.3}, α {:.4} ± {:.4}, residuals {:.2}× the noise, {} profiles, {:.1} s",
             off(&f, |m| m.sigma_a),
             off(&f, |m| m.sigma_s_reduced),
             f.media[0].eta,
-            f.residual_over_noise
+            f.alpha,
+            f.alpha_std.unwrap_or(0.0),
+            f.residual_over_noise,
+            f.profiles,
+            f.seconds
         );
         assert!(f.converged, "from {what}");
     }

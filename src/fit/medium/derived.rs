@@ -2,7 +2,7 @@
 //! free path and the surface's diffuse albedo, each std by its gradient in the fit's u.
 
 use super::errors::std_of;
-use super::problem::ETA;
+use super::problem::{ETA, IRRADIANCE};
 use crate::model::dipole::{Dipole, Medium};
 use nalgebra::{DMatrix, DVector};
 
@@ -78,7 +78,7 @@ pub(super) fn of(
             if irradiance_given {
                 0.0
             } else {
-                irradiance[c] * sqrt(covariance[(7 + c, 7 + c)])
+                irradiance[c] * sqrt(covariance[(IRRADIANCE + c, IRRADIANCE + c)])
             }
         }),
     };

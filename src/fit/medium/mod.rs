@@ -30,7 +30,7 @@ use crate::model::sphere_atlas::SphereAtlas;
 use crate::model::LightAngles;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector};
-use problem::{physical, predicted, profiles, Problem, ETA};
+use problem::{physical, predicted, profiles, Problem, ALPHA, ETA};
 use std::time::Instant;
 
 pub use derived::{Derived, PerChannel};
@@ -44,10 +44,11 @@ pub struct MediumFit {
     /// The irradiance per channel: the given one, or fitted.
     pub irradiance: [f64; 3],
     pub irradiance_given: bool,
-    /// The boundary's roughness used.
+    /// The boundary's GGX roughness: fitted (with its std), or held at the lobe's (std None).
     pub alpha: f64,
-    /// u = (ln σa ×3, ln σs′ ×3, ln(η − 1), [ln E ×3]) and its covariance (the stated one: the
-    /// statistical errors and the model's own).
+    pub alpha_std: Option<f64>,
+    /// u = (ln σa ×3, ln σs′ ×3, ln(η − 1), ln α, [ln E ×3]) and its covariance (the stated
+    /// one: the statistical errors and the model's own).
     pub u: DVector<f64>,
     pub covariance: DMatrix<f64>,
     /// Per u: the formal std and the jackknife's (None under three radii).
@@ -169,8 +170,9 @@ pub fn start(radii: &[Radius], setup: &Setup, sigma0_mm: [f64; 3]) -> Vec<f64> {
         }
         lp / pp
     };
-    let mut u = vec![0.0; 7];
-    u[6] = (eta - 1.0).ln();
+    let mut u = vec![0.0; 8];
+    u[ETA] = (eta - 1.0).ln();
+    u[ALPHA] = setup.alpha.max(1e-12).ln();
     let mut e = [0.0; 3];
     for c in 0..3 {
         let a = match setup.irradiance {
@@ -233,7 +235,10 @@ pub fn fit(
     light: Option<&LightError>,
 ) -> MediumFit {
     let t0 = Instant::now();
-    let atlas = SphereAtlas::new(setup.alpha);
+    let atlas = match setup.alpha_std {
+        Some(_) => SphereAtlas::free(),
+        None => SphereAtlas::new(setup.alpha),
+    };
     let free = solve(
         radii,
         setup,
@@ -272,7 +277,10 @@ pub fn fit(
         media: p.media,
         irradiance: p.irradiance,
         irradiance_given: setup.irradiance.is_some(),
-        alpha: setup.alpha,
+        alpha: p.boundary.alpha,
+        alpha_std: setup
+            .alpha_std
+            .map(|_| p.boundary.alpha * errors::std_of(errors.covariance[(ALPHA, ALPHA)])),
         u: problem.u.clone(),
         covariance: errors.covariance,
         std_formal: errors.std_formal,

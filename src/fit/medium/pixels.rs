@@ -11,8 +11,11 @@ pub struct Setup {
     pub light: Vector3<f64>,
     /// η's prior: the joint fit's η and its std.
     pub eta_prior: (f64, f64),
-    /// The boundary's GGX roughness (the lobe's α; 0: smooth).
+    /// The boundary's GGX roughness: the lobe's α (0: smooth), held, or with `alpha_std` the
+    /// prior of the α the fit measures.
     pub alpha: f64,
+    /// The std of `alpha` as a prior (the lobe's stated error); None: α is held at `alpha`.
+    pub alpha_std: Option<f64>,
     /// The light's irradiance in the photos' units, when known.
     pub irradiance: Option<f64>,
     /// The largest sphere's radius (mm): it bounds σs′ (`MAX_SIGMA_T_RADIUS`).

@@ -1,10 +1,12 @@
 //! The medium fit's least-squares problem for the crate `levenberg-marquardt`: residuals of every
 //! pixel and channel, (L − E_c · law(cos φ) · M_c(θ; R)) / σ, and a prior's residual on η.
 //!
-//! Parameters u: ln σa (×3), ln σs′ (×3), ln(η − 1), and without a known irradiance ln E (×3).
+//! Parameters u: ln σa (×3), ln σs′ (×3), ln(η − 1), ln α (the boundary's roughness; held, its
+//! column empty, where the setup gives it no prior), and without a known irradiance ln E (×3).
 //! M and the exit law come from the fit's [`SphereAtlas`] (M in dimensionless coordinates,
 //! shared by every radius, channel and stage), and so does the Jacobian: analytic, by the chain
-//! rule from the atlas's derivatives in x = ln(σt′R), y = ln(1 − α′) and η; E enters linearly.
+//! rule from the atlas's derivatives in x = ln(σt′R), y = ln(1 − α′), η and ln α; E enters
+//! linearly. Rows after the pixels': η's prior, the range's wall and α's prior.
 
 use super::pixels::{Px, Radius, Setup};
 use crate::model::boundary::Boundary;
@@ -23,6 +25,12 @@ const STEP: f64 = 1e-6;
 /// Index of ln(η − 1) in u.
 pub(super) const ETA: usize = 6;
 
+/// Index of ln α in u.
+pub(super) const ALPHA: usize = 7;
+
+/// Index of the first ln E in u (without a known irradiance).
+pub(super) const IRRADIANCE: usize = 8;
+
 /// The parameters as the model takes them.
 #[derive(Clone, Debug, PartialEq)]
 pub(super) struct Physical {
@@ -37,6 +45,7 @@ pub(super) struct Physical {
 /// rolled-off series resolves), so σs′ stops at 150 over the largest radius.
 pub(super) const SIGMA_A_RANGE: (f64, f64) = (1e-5, 5.0);
 pub(super) const ETA_RANGE: (f64, f64) = (1.05, 2.5);
+pub(super) const ALPHA_RANGE: (f64, f64) = (0.005, 0.6);
 pub(super) const MAX_SIGMA_T_RADIUS: f64 = 150.0;
 
 /// The residual per unit of u beyond the range: a wall that turns the solver back, where the
@@ -52,6 +61,11 @@ fn outside(u: &[f64], setup: &Setup) -> f64 {
         })
         .sum::<f64>()
         + beyond(u[ETA], (ETA_RANGE.0 - 1.0, ETA_RANGE.1 - 1.0))
+        + if setup.alpha_std.is_some() {
+            beyond(u[ALPHA], ALPHA_RANGE)
+        } else {
+            0.0
+        }
 }
 
 /// The parameters of `p` at the edge of their range (within 0.1%).
@@ -72,6 +86,9 @@ pub(super) fn at_bounds(p: &Physical, setup: &Setup) -> Vec<String> {
     if near(p.media[0].eta, ETA_RANGE) {
         out.push("η".into());
     }
+    if setup.alpha_std.is_some() && near(p.boundary.alpha, ALPHA_RANGE) {
+        out.push("α".into());
+    }
     out
 }
 
@@ -87,7 +104,15 @@ pub(super) fn physical(u: &[f64], setup: &Setup) -> Physical {
     Physical {
         media,
         irradiance,
-        boundary: Boundary::rough(media[0].eta, setup.alpha),
+        boundary: Boundary::rough(media[0].eta, roughness(u, setup)),
+    }
+}
+
+/// u → the boundary's roughness: the setup's where it is held, else held inside its range.
+pub(super) fn roughness(u: &[f64], setup: &Setup) -> f64 {
+    match setup.alpha_std {
+        Some(_) => within(u[ALPHA], ALPHA_RANGE),
+        None => setup.alpha,
     }
 }
 
@@ -101,7 +126,7 @@ fn media(u: &[f64], setup: &Setup) -> ([Medium; 3], [f64; 3]) {
     });
     let irradiance = match setup.irradiance {
         Some(e) => [e; 3],
-        None => std::array::from_fn(|c| u[7 + c].clamp(-30.0, 30.0).exp()),
+        None => std::array::from_fn(|c| u[IRRADIANCE + c].clamp(-30.0, 30.0).exp()),
     };
     (media, irradiance)
 }
@@ -168,7 +193,8 @@ fn flux_at(
 }
 
 /// [`predicted`] from the atlas's profile and exit law, with `gradient` its derivatives in the
-/// atlas's coordinates (x, y, η): the same product, each factor differentiated (without, zeros).
+/// atlas's coordinates (x, y, η, ln α): the same product, each factor differentiated (without,
+/// zeros).
 fn predicted_with_gradient(
     e: f64,
     medium: &Medium,
@@ -177,25 +203,29 @@ fn predicted_with_gradient(
     profile: &Profile,
     px: &Px,
     gradient: bool,
-) -> (f64, [f64; 3]) {
+) -> (f64, [f64; 4]) {
     let at = Tabulated::locate(px.cos_theta);
     let (m, log_slope) = profile.value.at_node(at);
     let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
-    let (l, dl_deta) = law.at(px.cos_phi);
+    let (l, dl_deta, dl_dalpha) = law.at(px.cos_phi);
     let scale = e * l;
     if !gradient {
-        return (scale * m * flux, [0.0; 3]);
+        return (scale * m * flux, [0.0; 4]);
     }
     let gradient = std::array::from_fn(|q| {
         let (dm, ds) = profile.d[q].at_node(at);
         let own = match q {
             0 => g.ln_sigma_t_radius,
             1 => g.k * dk_dy,
-            _ => g.eta,
+            2 => g.eta,
+            // The flux along the surface does not see the boundary's roughness.
+            _ => 0.0,
         };
         let mut v = scale * (dm * flux + m * (g.log_slope * ds + own));
-        if q == 2 {
-            v += e * dl_deta * m * flux;
+        match q {
+            2 => v += e * dl_deta * m * flux,
+            3 => v += e * dl_dalpha * m * flux,
+            _ => {}
         }
         v
     });
@@ -232,16 +262,17 @@ impl<'a> Problem<'a> {
             u: u.clone(),
             atlas,
             tables: Vec::new(),
-            law: atlas.law(1.0 + u[ETA].exp()),
+            law: atlas.law(1.0 + u[ETA].exp(), u[ALPHA]),
             eta_held,
         };
         p.set_params(&u);
         p
     }
 
-    /// How many residuals: every used channel of every pixel, η's prior and the range's wall.
+    /// How many residuals: every used channel of every pixel, η's prior, the range's wall and
+    /// α's prior.
     pub(super) fn rows(&self) -> usize {
-        self.pixel_rows() + 2
+        self.pixel_rows() + 3
     }
 
     /// The pixels' residuals: every used channel of every pixel.
@@ -266,11 +297,11 @@ impl<'a> Problem<'a> {
     }
 
     /// Every residual at the current u, and with `gradient` each pixel row's derivatives in
-    /// the atlas's coordinates (x, y, η) of its channel's prediction.
-    fn evaluate(&self, gradient: bool) -> (DVector<f64>, Vec<[f64; 3]>) {
+    /// the atlas's coordinates (x, y, η, ln α) of its channel's prediction.
+    fn evaluate(&self, gradient: bool) -> (DVector<f64>, Vec<[f64; 4]>) {
         let (media, irradiance) = media(self.u.as_slice(), self.setup);
         let mut out = DVector::zeros(self.rows());
-        let mut grad = vec![[0.0; 3]; if gradient { self.pixel_rows() } else { 0 }];
+        let mut grad = vec![[0.0; 4]; if gradient { self.pixel_rows() } else { 0 }];
         for (r, radius) in self.radii.iter().enumerate() {
             for c in 0..3 {
                 let at = self.offset(r, c);
@@ -293,17 +324,26 @@ impl<'a> Problem<'a> {
             }
         }
         let at = self.pixel_rows();
-        let prior = self.prior_rows(&self.u);
-        out[at] = prior[0];
-        out[at + 1] = prior[1];
+        for (k, v) in self.prior_rows(&self.u).into_iter().enumerate() {
+            out[at + k] = v;
+        }
         (out, grad)
     }
 
-    /// The rows after the pixels': η's prior and the range's wall.
-    fn prior_rows(&self, u: &DVector<f64>) -> [f64; 2] {
+    /// The rows after the pixels': η's prior, the range's wall and α's prior (0 where α is
+    /// held).
+    fn prior_rows(&self, u: &DVector<f64>) -> [f64; 3] {
         let eta = media(u.as_slice(), self.setup).0[0].eta;
         let (mean, std) = self.setup.eta_prior;
-        [(eta - mean) / std, WALL * outside(u.as_slice(), self.setup)]
+        let alpha = match self.setup.alpha_std {
+            Some(s) => (roughness(u.as_slice(), self.setup) - self.setup.alpha) / s,
+            None => 0.0,
+        };
+        [
+            (eta - mean) / std,
+            WALL * outside(u.as_slice(), self.setup),
+            alpha,
+        ]
     }
 }
 
@@ -315,10 +355,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     fn set_params(&mut self, x: &DVector<f64>) {
         self.u = x.clone();
         let (media, _) = media(x.as_slice(), self.setup);
+        let alpha = roughness(x.as_slice(), self.setup);
         let points: Vec<Coordinates> = self
             .radii
             .iter()
-            .flat_map(|r| media.iter().map(|m| Coordinates::of(m, r.radius_mm)))
+            .flat_map(|r| media.iter().map(move |m| Coordinates::of(m, r.radius_mm, alpha)))
             .collect();
         self.atlas.ensure(&points);
         let profiles: Vec<Profile> = points.par_iter().map(|p| self.atlas.profile(p)).collect();
@@ -328,7 +369,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
             .iter()
             .map(|_| std::array::from_fn(|_| profiles.next().expect("a profile per point")))
             .collect();
-        self.law = self.atlas.law(media[0].eta);
+        self.law = self.atlas.law(media[0].eta, alpha.ln());
     }
 
     fn params(&self) -> DVector<f64> {
@@ -351,15 +392,19 @@ impl Problem<'_> {
     ///
     /// A pixel's prediction depends on its channel's σa and σs′ through the atlas's
     /// x = ln(σt′R) and y = ln(σa/σt′): ∂x/∂ln σa = σa/σt′, ∂x/∂ln σs′ = σs′/σt′,
-    /// ∂y/∂ln σa = σs′/σt′ = −∂y/∂ln σs′; on η through ∂η/∂ln(η − 1) = η − 1. A parameter held at
-    /// its range's edge has no column. The rows after the pixels' are differenced centrally
-    /// (step [`STEP`]).
+    /// ∂y/∂ln σa = σs′/σt′ = −∂y/∂ln σs′; on η through ∂η/∂ln(η − 1) = η − 1; on ln α
+    /// directly. A parameter held at its range's edge, or α held by the setup, has no column.
+    /// The rows after the pixels' are differenced centrally (step [`STEP`]).
     pub(super) fn jacobian_with(&self, eta_pixels: bool) -> Option<DMatrix<f64>> {
         let (base, grad) = self.evaluate(true);
         let (media, _) = media(self.u.as_slice(), self.setup);
         let mut jac = DMatrix::zeros(self.rows(), self.u.len());
         let u = self.u.as_slice();
         let eta_free = free(u[ETA], (ETA_RANGE.0 - 1.0, ETA_RANGE.1 - 1.0)) * (media[0].eta - 1.0);
+        let alpha_free = match self.setup.alpha_std {
+            Some(_) => free(u[ALPHA], ALPHA_RANGE),
+            None => 0.0,
+        };
         let s_range = sigma_s_range(self.setup.largest_radius);
         for (r, radius) in self.radii.iter().enumerate() {
             for (c, m) in media.iter().enumerate() {
@@ -375,10 +420,11 @@ impl Problem<'_> {
                     if eta_pixels {
                         jac[(at + k, ETA)] = w * eta_free * g[2];
                     }
+                    jac[(at + k, ALPHA)] = w * alpha_free * g[3];
                 }
             }
         }
-        // η's prior and the wall, by differences (no profile involved).
+        // η's prior, the wall and α's prior, by differences (no profile involved).
         let at = self.pixel_rows();
         for k in 0..self.u.len() {
             let rows = |d: f64| {
@@ -387,8 +433,9 @@ impl Problem<'_> {
                 self.prior_rows(&moved)
             };
             let (up, down) = (rows(STEP), rows(-STEP));
-            jac[(at, k)] = (up[0] - down[0]) / (2.0 * STEP);
-            jac[(at + 1, k)] = (up[1] - down[1]) / (2.0 * STEP);
+            for q in 0..3 {
+                jac[(at + q, k)] = (up[q] - down[q]) / (2.0 * STEP);
+            }
         }
         // The irradiance, linear: ∂r/∂ln E_c = −prediction/σ · σ = −(radiance·w − r).
         if self.setup.irradiance.is_none() {
@@ -396,7 +443,8 @@ impl Problem<'_> {
                 for (r, radius) in self.radii.iter().enumerate() {
                     let at = self.offset(r, c);
                     for (k, px) in radius.pixels[c].iter().enumerate() {
-                        jac[(at + k, 7 + c)] = -(px.radiance * px.weight - base[at + k]);
+                        jac[(at + k, IRRADIANCE + c)] =
+                            -(px.radiance * px.weight - base[at + k]);
                     }
                 }
             }
@@ -412,12 +460,13 @@ pub(super) mod tests {
     use nalgebra::Vector3;
 
     /// Two radii (10, 20 mm) of a medium's own prediction, nudged by ±4%, without a known
-    /// irradiance: the setup, the radii and the truth's u.
-    pub fn fixture() -> (Setup, Vec<Radius>, [f64; 10]) {
+    /// irradiance, the boundary's roughness free: the setup, the radii and the truth's u.
+    pub fn fixture() -> (Setup, Vec<Radius>, [f64; 11]) {
         let setup = Setup {
             light: Vector3::z(),
             eta_prior: (1.44, 0.05),
-            alpha: 0.1,
+            alpha: 0.11,
+            alpha_std: Some(0.03),
             irradiance: None,
             largest_radius: 20.0,
         };
@@ -429,6 +478,7 @@ pub(super) mod tests {
             -0.1,
             -0.2,
             0.44f64.ln(),
+            0.11f64.ln(),
             1.0,
             1.1,
             1.2,
@@ -479,7 +529,7 @@ pub(super) mod tests {
     fn the_jacobian_follows_central_differences() {
         let (setup, radii, truth) = fixture();
         let at: Vec<f64> = truth.iter().map(|v| v + 0.05).collect();
-        let atlas = SphereAtlas::new(setup.alpha);
+        let atlas = SphereAtlas::free();
         let problem = Problem::new(&radii, &setup, &atlas, DVector::from_vec(at.clone()), false);
         let jac = problem.jacobian().unwrap();
         let largest = jac.iter().fold(0.0f64, |a, v| a.max(v.abs()));
