@@ -228,7 +228,12 @@ impl SphereAtlas {
             .into_iter()
             .flat_map(|(a, _, _)| {
                 (0..64).map(move |n| {
-                    [first[0] + n / 16, first[1] + (n / 4) % 4, first[2] + n % 4, a]
+                    [
+                        first[0] + n / 16,
+                        first[1] + (n / 4) % 4,
+                        first[2] + n % 4,
+                        a,
+                    ]
                 })
             })
             .collect()
@@ -450,8 +455,8 @@ mod tests {
         }
         let a = p.ln_alpha;
         let (l, dl, dla) = atlas.law(p.eta, a).at(0.6);
-        let numeric = (atlas.law(p.eta + h, a).at(0.6).0 - atlas.law(p.eta - h, a).at(0.6).0)
-            / (2.0 * h);
+        let numeric =
+            (atlas.law(p.eta + h, a).at(0.6).0 - atlas.law(p.eta - h, a).at(0.6).0) / (2.0 * h);
         assert!(
             (dl - numeric).abs() < 1e-6 * l,
             "law: {dl} against {numeric}"

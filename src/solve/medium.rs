@@ -190,6 +190,21 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     notes.push(format!(
         "medium: η {eta:.3} ± {eta_std:.3} combines the joint fit's {j:.3} ± {js:.3} and the medium's pixels' {p:.3} ± {ps:.3} (their errors include each one's own error on physically based renders; docs/medium.md)"
     ));
+    match (f.alpha_std, f.alpha_lobe) {
+        (Some(std), Some((lobe, lobe_std))) => notes.push(format!(
+            "medium: the boundary's roughness α {:.3} ± {std:.3} is the medium's pixels' (its level and terminator), with the joint fit's lobe α {lobe:.3} ± {lobe_std:.3} as its prior (docs/medium.md)",
+            f.alpha
+        )),
+        _ => notes.push(format!(
+            "medium: the boundary's roughness α held at {:.3}, the joint fit's lobe's{}",
+            f.alpha,
+            if f.alpha > 0.0 {
+                ", which states no error for it"
+            } else {
+                " (no lobe: a smooth boundary)"
+            }
+        )),
+    }
     if f.radii.len() < 3 {
         notes.push(format!(
             "medium: {} radius(es), too few for the jackknife: the errors are formal only",
@@ -238,7 +253,7 @@ fn json(
             "fitted with the medium (no --irradiance)".into()
         },
         std_source: format!(
-            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′{}",
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′; {}{}",
             if f.std_jackknife.is_some() {
                 "larger of formal and jackknife"
             } else {
@@ -248,6 +263,11 @@ fn json(
             100.0 * MODEL_ERROR.sigma_s_reduced,
             f.residual_over_noise.max(1.0),
             MODEL_ERROR.eta,
+            if f.alpha_std.is_some() {
+                "the boundary's roughness fitted with them (the lobe's α its prior), so its error is in theirs"
+            } else {
+                "the boundary's roughness held at the lobe's, without an error"
+            },
             if f.std_light.is_some() {
                 "; the held light's error (the joint fit's) carried into them by their sensitivity to its two angles"
             } else {

@@ -1,9 +1,10 @@
 //! The medium fit (`solve --model medium`, docs/medium.md "The medium fit"): σa and σs′ per
 //! channel and η from the spheres' pixels, by diffusion solved in each sphere
 //! ([`crate::model::sphere_diffusion`], beam sources, level corrected) entering and leaving
-//! through the boundary the highlights measured ([`crate::model::boundary`], GGX of the lobe's
-//! roughness). The light is held where the joint fit put it, and η's prior is the joint fit's
-//! η with its error.
+//! through a GGX boundary ([`crate::model::boundary`]) whose roughness α the fit measures with
+//! them, the joint fit's lobe α and its error as α's prior (the lobe's α, held, moved jade's σa
+//! by up to +145%: docs/medium.md, "The roughness measured with the medium"). The light is held
+//! where the joint fit put it, and η's prior is the joint fit's η with its error.
 //!
 //! Pixels near the highlight (half vector within 25° of the normal) and the rim (φ beyond 75°)
 //! are left out: the lobe and the rough boundary's grazing exit rule them, and neither is in the
@@ -47,6 +48,8 @@ pub struct MediumFit {
     /// The boundary's GGX roughness: fitted (with its std), or held at the lobe's (std None).
     pub alpha: f64,
     pub alpha_std: Option<f64>,
+    /// α's prior where it was fitted: the lobe's α and std.
+    pub alpha_lobe: Option<(f64, f64)>,
     /// u = (ln σa ×3, ln σs′ ×3, ln(η − 1), ln α, [ln E ×3]) and its covariance (the stated
     /// one: the statistical errors and the model's own).
     pub u: DVector<f64>,
@@ -281,6 +284,7 @@ pub fn fit(
         alpha_std: setup
             .alpha_std
             .map(|_| p.boundary.alpha * errors::std_of(errors.covariance[(ALPHA, ALPHA)])),
+        alpha_lobe: setup.alpha_std.map(|s| (setup.alpha, s)),
         u: problem.u.clone(),
         covariance: errors.covariance,
         std_formal: errors.std_formal,

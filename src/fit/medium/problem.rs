@@ -359,7 +359,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
         let points: Vec<Coordinates> = self
             .radii
             .iter()
-            .flat_map(|r| media.iter().map(move |m| Coordinates::of(m, r.radius_mm, alpha)))
+            .flat_map(|r| {
+                media
+                    .iter()
+                    .map(move |m| Coordinates::of(m, r.radius_mm, alpha))
+            })
             .collect();
         self.atlas.ensure(&points);
         let profiles: Vec<Profile> = points.par_iter().map(|p| self.atlas.profile(p)).collect();
@@ -443,8 +447,7 @@ impl Problem<'_> {
                 for (r, radius) in self.radii.iter().enumerate() {
                     let at = self.offset(r, c);
                     for (k, px) in radius.pixels[c].iter().enumerate() {
-                        jac[(at + k, IRRADIANCE + c)] =
-                            -(px.radiance * px.weight - base[at + k]);
+                        jac[(at + k, IRRADIANCE + c)] = -(px.radiance * px.weight - base[at + k]);
                     }
                 }
             }

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# The medium fit on the eleven physically based sessions (docs/medium.md, "The medium fit"):
+# `workbench solve <fresh copy> --model medium --irradiance <truth's> --holdout 15` on
+# datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade (its five single-sphere photos)
+# and datasets/pbr-seeds/*, printing per session the errors against the truth (σa, σs′ per
+# channel; η; α), the largest |error|/std over σa, σs′ and η, the residuals over the noise, the
+# held-out sphere's error (medium / CDRF), the profiles and the medium fit's time.
+# Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
+set -uo pipefail
+cd "$(dirname "$0")/.."
+wb=$(realpath "${1:-target/release/workbench}")
+out=${2:-$(mktemp -d)}
+shift 2 2>/dev/null || shift $#
+mkdir -p "$out"
+sessions=("$@")
+[ ${#sessions[@]} -eq 0 ] && sessions=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
+for s in "${sessions[@]}"; do
+  d="$out/$s"
+  rm -rf "$d" "$d.fit.json"
+  case $s in
+    pbr-soap | pbr-wax) cp -r "datasets/$s" "$d" ;;
+    pbr-jade)
+      cp -r ../shared/data/pbr-jade "$d"
+      python3 - "$d/session.json" <<'PY'
+import json, sys
+p = sys.argv[1]
+s = json.load(open(p))
+s["images"] = [i for i in s["images"] if i["file"] != "row.png"]
+json.dump(s, open(p, "w"), indent=1)
+PY
+      ;;
+    *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
+  esac
+  rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
+  e=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['irradiance_in_png_units'])" "$d/truth.json")
+  "$wb" --quiet solve "$d" --model medium --irradiance "$e" --holdout 15 --out "$d.fit.json" >"$d.log" 2>&1
+  python3 - "$d.fit.json" "$d/truth.json" "$s" <<'PY'
+import json, sys
+try:
+    f = json.load(open(sys.argv[1]))
+except Exception as e:
+    sys.exit(f"{sys.argv[3]}: no fit.json ({e})")
+t = json.load(open(sys.argv[2]))
+m = t["material"]
+if "medium" in m:  # ../shared/data/pbr-jade
+    sa, ss = m["medium"]["sigma_a_rgb"], m["medium"]["sigma_s_rgb"]
+    eta, alpha = m["boundary"]["int_ior"], m["boundary"]["alpha"]
+else:
+    st, al = m["sigma_t_per_mm"], m["albedo_rgb"]
+    sa, ss = [st * (1 - a) for a in al], [st * a for a in al]
+    eta, alpha = m["eta"], m["alpha"]
+md = f["medium"]
+pct = lambda k, tr: [100 * (md[k]["value"][c] / tr[c] - 1) for c in range(3)]
+z = lambda k, tr: [abs(md[k]["value"][c] - tr[c]) / md[k]["std"][c] for c in range(3)]
+ea, es = pct("sigma_a_per_mm", sa), pct("sigma_s_reduced_per_mm", ss)
+de = md["eta"]["value"] - eta
+worst = max(z("sigma_a_per_mm", sa) + z("sigma_s_reduced_per_mm", ss) + [abs(de) / md["eta"]["std"]])
+h = md.get("holdout") or {}
+al_std = md.get("alpha_std")
+print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es[0]:+.1f} {es[1]:+.1f} {es[2]:+.1f}%  "
+      f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f})  "
+      f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha})  "
+      f"err/std {worst:.2f}  res/noise {md['residual_over_noise']:.2f}  "
+      f"held-out {100*h.get('medium_rel_rmse', float('nan')):.2f}%/{100*h.get('cdrf_rel_rmse', float('nan')):.2f}%  "
+      f"{md['profiles']} profiles {md['seconds']:.1f} s")
+PY
+done
