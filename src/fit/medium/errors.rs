@@ -271,7 +271,7 @@ mod tests {
             .ln();
         u[3] = edge + 0.01;
         u[5] = edge + 0.02;
-        let atlas = SphereAtlas::free();
+        let atlas = SphereAtlas::free(setup.alpha);
         let problem = Problem::new(&radii, &setup, &atlas, DVector::from_vec(u), false);
         let errors = of(&problem, None);
         for (k, s) in errors.std_formal.iter().enumerate() {

@@ -239,7 +239,7 @@ pub fn fit(
 ) -> MediumFit {
     let t0 = Instant::now();
     let atlas = match setup.alpha_std {
-        Some(_) => SphereAtlas::free(),
+        Some(_) => SphereAtlas::free(setup.alpha),
         None => SphereAtlas::new(setup.alpha),
     };
     let free = solve(
@@ -270,12 +270,20 @@ pub fn fit(
     let step = (eta.0 - 1.0).ln() - u[ETA];
     u += &free_errors.eta_sensitivity * step;
     u[ETA] = (eta.0 - 1.0).ln();
-    let (problem, report) = solve(radii, &held_setup, &atlas, u, true);
+    // The free atlas is exact at its full nodes' roughness and close within half a cell of it:
+    // the second stage's full nodes go to the first stage's α.
+    let rebased = match setup.alpha_std {
+        Some(_) => Some(SphereAtlas::free(problem::roughness(u.as_slice(), setup)))
+            .filter(|a| a.base() != atlas.base()),
+        None => None,
+    };
+    let second = rebased.as_ref().unwrap_or(&atlas);
+    let (problem, report) = solve(radii, &held_setup, second, u, true);
     let p = physical(problem.u.as_slice(), setup);
     let mut errors = errors::of(&problem, Some(eta.1));
     let carried = light.and_then(|le| carry_light(&mut errors.covariance, &problem, le));
     let (light_sensitivity, std_light) = carried.unzip();
-    let profiles = atlas.computed();
+    let profiles = atlas.computed() + rebased.as_ref().map_or(0, SphereAtlas::computed);
     MediumFit {
         media: p.media,
         irradiance: p.irradiance,

@@ -532,7 +532,7 @@ pub(super) mod tests {
     fn the_jacobian_follows_central_differences() {
         let (setup, radii, truth) = fixture();
         let at: Vec<f64> = truth.iter().map(|v| v + 0.05).collect();
-        let atlas = SphereAtlas::free();
+        let atlas = SphereAtlas::free(setup.alpha);
         let problem = Problem::new(&radii, &setup, &atlas, DVector::from_vec(at.clone()), false);
         let jac = problem.jacobian().unwrap();
         let largest = jac.iter().fold(0.0f64, |a, v| a.max(v.abs()));
