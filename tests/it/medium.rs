@@ -1819,9 +1819,11 @@ fn the_light_sensitivity_follows_refits() {
 /// `datasets/pbr-seeds` (`SESSION`, default jade-6) with every outline where truth.json puts it,
 /// the truth's light, irradiance and roughness, η's prior the truth's ± 0.02, and the 20–35 mm
 /// spheres, from three starts (the truth itself, the start from the truth's diffusion length, the
-/// start from the joint fit's σ0 of jade-6). `ETA=1.405:0.069` and `ALPHA=0.091` replace η's prior
-/// and the roughness by the joint fit's (jade-6's). The table of docs/medium.md, "Jade: not the
-/// outlines, not the light's place, but the light's error":
+/// start from the joint fit's σ0 of jade-6). `ETA=1.405:0.069` replaces η's prior by the joint
+/// fit's (jade-6's); `ALPHA=0.091` holds the roughness there, `ALPHA=0.094:0.031` makes it the
+/// prior of the α the fit measures (as `solve` does with the lobe's). The tables of
+/// docs/medium.md, "Jade: not the outlines, not the light's place, but the light's error" and
+/// "The roughness measured with the medium":
 /// `cargo test --release --test it -- --ignored medium::the_fit_from_the_truths_inputs --nocapture`.
 #[test]
 #[ignore]
