@@ -4,7 +4,8 @@
 # datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade (its five single-sphere photos)
 # and datasets/pbr-seeds/*, printing per session the errors against the truth (σa, σs′ per
 # channel; η; α), the largest |error|/std over σa, σs′ and η, the residuals over the noise, the
-# held-out sphere's error (medium / CDRF), the profiles and the medium fit's time.
+# held-out sphere's error (medium / CDRF), the profiles, the medium fit's time and the whole
+# solve's (fit.json's timings, and over decoding the photos).
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -62,6 +63,7 @@ print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es
       f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha})  "
       f"err/std {worst:.2f}  res/noise {md['residual_over_noise']:.2f}  "
       f"held-out {100*h.get('medium_rel_rmse', float('nan')):.2f}%/{100*h.get('cdrf_rel_rmse', float('nan')):.2f}%  "
-      f"{md['profiles']} profiles {md['seconds']:.1f} s")
+      f"{md['profiles']} profiles {md['seconds']:.1f} s  "
+      f"whole solve {f['timings']['total_s']:.2f} s ({f['timings']['total_s'] / f['timings']['decode_s']:.0f}x decoding)")
 PY
 done
