@@ -78,7 +78,7 @@ pub(super) fn run(
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
-    Some(json(&f, &setup, holdout, given_by))
+    Some(json(&f, holdout, given_by))
 }
 
 /// The std of the lobe's α as the medium fit's prior on the boundary's roughness, which the
@@ -218,12 +218,7 @@ fn value((value, std): (f64, f64)) -> ValueJson {
 }
 
 /// fit.json's medium; `given_by` says where a given irradiance came from.
-fn json(
-    f: &MediumFit,
-    setup: &Setup,
-    holdout: Option<MediumHoldoutJson>,
-    given_by: &str,
-) -> MediumJson {
+fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> MediumJson {
     let d = f.derived();
     let per = |p: medium::PerChannel| PerChannelJson {
         value: p.value,
@@ -233,10 +228,7 @@ fn json(
         profile: PROFILE.into(),
         alpha: f.alpha,
         alpha_std: f.alpha_std,
-        alpha_lobe: setup.alpha_std.map(|std| ValueJson {
-            value: setup.alpha,
-            std,
-        }),
+        alpha_lobe: f.alpha_lobe.map(value),
         sigma_a_per_mm: per(d.sigma_a),
         sigma_s_reduced_per_mm: per(d.sigma_s_reduced),
         eta: value(d.eta),
