@@ -927,7 +927,8 @@ fn medium_solve(
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
 /// out: measured (2026-12-06, α measured: 0.089) η 1.400 against 1.4; σa −1.8, −1.7, −0.8%; σs′
 /// +2.7, +2.4, +2.4%; residuals 0.86× the noise; the held-out sphere 3.86% by the medium, 7.31%
-/// by the CDRF on the same pixels. (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
+/// by the CDRF on the same pixels; α 0.089 ± 0.010 from the lobe's 0.071 ± 0.014 (asserted
+/// within 0.025 of the truth). (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
 /// σs′ −1.3, −2.0, −2.5%, held out 3.82%. With the deepest shadow fitted too: σa +1.4, −0.2, −1.2%,
 /// held out 3.96%; before the flux along the surface and η's combination: η 1.402, σa +5 to
 /// +6%, σs′ +7 to +9%, held out 4.21%.) Asserted: η within 0.015, σa and σs′ within 5%, residuals
@@ -939,6 +940,17 @@ fn the_medium_of_the_soap_renders() {
     let (dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
     assert!((m.eta.value - 1.4).abs() < 0.015, "η {}", m.eta.value);
+    // The roughness measured, from the lobe's α as its prior.
+    let lobe = m.alpha_lobe.expect("the lobe's α, α's prior");
+    println!(
+        "α {:.4} ± {:.4} (truth {}; the lobe's {:.4} ± {:.4})",
+        m.alpha,
+        m.alpha_std.expect("α measured"),
+        t.alpha,
+        lobe.value,
+        lobe.std
+    );
+    assert!((m.alpha - t.alpha).abs() < 0.025, "α {}", m.alpha);
     for c in 0..3 {
         let (a, s) = (&m.sigma_a_per_mm, &m.sigma_s_reduced_per_mm);
         let ea = a.value[c] / t.media[c].sigma_a - 1.0;
