@@ -171,6 +171,11 @@ impl SphereAtlas {
         self.alpha.is_none().then_some(self.base)
     }
 
+    /// The roughness of a free atlas's full nodes (None: one roughness).
+    pub fn base_alpha(&self) -> Option<f64> {
+        self.base().map(|k| self.alpha_of(k))
+    }
+
     /// Nodes computed so far (the atlas's cost).
     pub fn computed(&self) -> usize {
         self.computed.load(Ordering::Relaxed)
