@@ -903,6 +903,15 @@ fn medium_solve(
     extra: &[&str],
 ) -> (tempfile::TempDir, Truth, workbench::formats::fit::FitFile) {
     let dir = common::session_copy(src);
+    let (t, f) = medium_solve_in(&dir, extra);
+    (dir, t, f)
+}
+
+/// [`medium_solve`] on a session copied already.
+fn medium_solve_in(
+    dir: &tempfile::TempDir,
+    extra: &[&str],
+) -> (Truth, workbench::formats::fit::FitFile) {
     let t = truth(dir.path());
     let e = format!("{}", t.irradiance);
     let d = dir.path().to_str().unwrap();
@@ -921,7 +930,7 @@ fn medium_solve(
     let f: workbench::formats::fit::FitFile =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("fit.json")).unwrap())
             .unwrap();
-    (dir, t, f)
+    (t, f)
 }
 
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
@@ -999,25 +1008,7 @@ fn the_bundled_jade_is_measured_with_its_roughness() {
         .unwrap()
         .retain(|i| i["file"] != "row.png");
     std::fs::write(&session, serde_json::to_string(&s).unwrap()).unwrap();
-    let t = truth(dir.path());
-    let e = format!("{}", t.irradiance);
-    let d = dir.path().to_str().unwrap();
-    let args = [
-        "--quiet",
-        "solve",
-        d,
-        "--model",
-        "medium",
-        "--irradiance",
-        &e,
-        "--holdout",
-        "15",
-    ];
-    let (code, out, err) = common::wb(&args);
-    assert_eq!(code, 0, "{out}\n{err}");
-    let f: workbench::formats::fit::FitFile =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fit.json")).unwrap())
-            .unwrap();
+    let (t, f) = medium_solve_in(&dir, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
     let alpha_std = m.alpha_std.expect("α measured");
     println!("α {:.4} ± {alpha_std:.4} (truth {})", m.alpha, t.alpha);
