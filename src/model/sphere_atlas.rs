@@ -242,13 +242,8 @@ impl SphereAtlas {
         let (fx, wx, dx) = stencil(p.x, SPACING[0]);
         let (fy, wy, dy) = stencil(p.y, SPACING[1]);
         let (fe, we, de) = stencil(p.eta, SPACING[2]);
-        let (base, k0, t) = match self.alpha {
-            Some(_) => (0, 0, 0.0),
-            None => {
-                let s = p.ln_alpha / ALPHA_SPACING;
-                (self.base, s.floor() as i64, s - s.floor())
-            }
-        };
+        // An atlas of one roughness keeps its nodes at roughness index 0, its `base`.
+        let base = self.base;
         let mut out = Vec::with_capacity(80);
         for n in 0..64 {
             let (i, j, k) = (n / 16, (n / 4) % 4, n % 4);
@@ -264,6 +259,10 @@ impl SphereAtlas {
             ));
         }
         if self.alpha.is_none() {
+            // (node, its share of M_α − M_base, that share's derivative in ln α): the two
+            // roughness nodes around α, less the full nodes' roughness.
+            let mut shares = self.alpha_stencil(p.ln_alpha);
+            shares.push((base, -1.0, 0.0));
             let linear = |v: f64, h: f64| {
                 let f = v / h - (v / h).floor();
                 ([1.0 - f, f], [-1.0 / h, 1.0 / h])
@@ -280,12 +279,7 @@ impl SphereAtlas {
                     lx[i] * ly[j] * lde[k],
                 ];
                 let at = [fx + 1 + i as i64, fy + 1 + j as i64, fe + 1 + k as i64];
-                // (node, its share of M_α − M_base, that share's derivative in ln α)
-                for (a, share, d) in [
-                    (k0, 1.0 - t, -1.0 / ALPHA_SPACING),
-                    (k0 + 1, t, 1.0 / ALPHA_SPACING),
-                    (base, -1.0, 0.0),
-                ] {
+                for &(a, share, d) in &shares {
                     out.push((
                         [at[0], at[1], at[2], a],
                         [share * l, share * g[0], share * g[1], share * g[2], d * l],

@@ -270,7 +270,7 @@ pub fn fit(
     let step = (eta.0 - 1.0).ln() - u[ETA];
     u += &free_errors.eta_sensitivity * step;
     u[ETA] = (eta.0 - 1.0).ln();
-    let rebased = rebased(&atlas, radii, setup, (free.0.u.as_slice(), u.as_slice()));
+    let rebased = rebased(&atlas, radii, setup, free.0.u.as_slice(), u.as_slice());
     let second = rebased.as_ref().unwrap_or(&atlas);
     let (problem, report) = solve(radii, &held_setup, second, u, true);
     let p = physical(problem.u.as_slice(), setup);
@@ -313,7 +313,7 @@ pub fn fit(
 
 /// The free atlas's M is exact at its full nodes' roughness and within 4.6e-3 half a cell from
 /// it, worse further at a sharp terminator (`sphere_atlas`'s tests). So the second stage, which
-/// starts at `(first, start).1`, gets an atlas whose full nodes sit at its α, unless that is
+/// starts at `start`, gets an atlas whose full nodes sit at its α, unless that is
 /// their node already, or the first atlas's M still holds where the first stage ended
 /// (`first`, whose nodes are all there): its error from the roughness within
 /// [`REBASE_TOLERANCE`] ([`roughness_error`]: two profiles a radius and channel, where a new
@@ -322,7 +322,8 @@ fn rebased(
     atlas: &SphereAtlas,
     radii: &[Radius],
     setup: &Setup,
-    (first, start): (&[f64], &[f64]),
+    first: &[f64],
+    start: &[f64],
 ) -> Option<SphereAtlas> {
     setup.alpha_std?;
     let moved = SphereAtlas::free(problem::roughness(start, setup));
@@ -518,9 +519,9 @@ mod tests {
         println!("from the roughness: the fixture's media {e_fixture:.1e}, jade-like {e_jade:.1e}");
         assert!(e_fixture < REBASE_TOLERANCE, "{e_fixture}");
         assert!(e_jade > REBASE_TOLERANCE, "{e_jade}");
-        assert!(rebased(&atlas, &radii, &setup, (&truth, &truth)).is_none());
-        assert!(rebased(&atlas, &radii, &setup, (&jade, &jade)).is_some());
+        assert!(rebased(&atlas, &radii, &setup, &truth, &truth).is_none());
+        assert!(rebased(&atlas, &radii, &setup, &jade, &jade).is_some());
         let here = SphereAtlas::free(setup.alpha);
-        assert!(rebased(&here, &radii, &setup, (&jade, &jade)).is_none());
+        assert!(rebased(&here, &radii, &setup, &jade, &jade).is_none());
     }
 }
