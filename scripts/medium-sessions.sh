@@ -3,9 +3,9 @@
 # `workbench solve <fresh copy> --model medium --irradiance <truth's> --holdout 15` on
 # datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade (its five single-sphere photos)
 # and datasets/pbr-seeds/*, printing per session the errors against the truth (σa, σs′ per
-# channel; η; α), the largest |error|/std over σa, σs′ and η, the residuals over the noise, the
-# held-out sphere's error (medium / CDRF), the profiles, the medium fit's time and the whole
-# solve's (fit.json's timings, and over decoding the photos).
+# channel; η; α and its |error|/std), the largest |error|/std over σa, σs′ and η, the residuals
+# over the noise, the held-out sphere's error (medium / CDRF), the profiles, the medium fit's
+# time and the whole solve's (fit.json's timings, and over decoding the photos).
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -60,7 +60,8 @@ h = md.get("holdout") or {}
 al_std = md.get("alpha_std")
 print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es[0]:+.1f} {es[1]:+.1f} {es[2]:+.1f}%  "
       f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f})  "
-      f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha})  "
+      f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha}; "
+      f"{abs(md['alpha'] - alpha) / al_std if al_std else float('nan'):.2f} std)  "
       f"err/std {worst:.2f}  res/noise {md['residual_over_noise']:.2f}  "
       f"held-out {100*h.get('medium_rel_rmse', float('nan')):.2f}%/{100*h.get('cdrf_rel_rmse', float('nan')):.2f}%  "
       f"{md['profiles']} profiles {md['seconds']:.1f} s  "

@@ -192,8 +192,9 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     ));
     match (f.alpha_std, f.alpha_lobe) {
         (Some(std), Some((lobe, lobe_std))) => notes.push(format!(
-            "medium: the boundary's roughness α {:.3} ± {std:.3} is the medium's pixels' (its level and terminator), with the joint fit's lobe α {lobe:.3} ± {lobe_std:.3} as its prior (docs/medium.md)",
-            f.alpha
+            "medium: the boundary's roughness α {:.3} ± {std:.3} is the medium's pixels' (its level and terminator), with the joint fit's lobe α {lobe:.3} ± {lobe_std:.3} as its prior; its error includes the model's own {:.0}% (docs/medium.md)",
+            f.alpha,
+            100.0 * MODEL_ERROR.alpha
         )),
         _ => notes.push(format!(
             "medium: the boundary's roughness α held at {:.3}, the joint fit's lobe's{}",
@@ -256,9 +257,12 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             f.residual_over_noise.max(1.0),
             MODEL_ERROR.eta,
             if f.alpha_std.is_some() {
-                "the boundary's roughness fitted with them (the lobe's α its prior), so its error is in theirs"
+                format!(
+                    "the boundary's roughness fitted with them (the lobe's α its prior), so its error is in theirs, and its own error includes the model's {:.0}% on α",
+                    100.0 * MODEL_ERROR.alpha
+                )
             } else {
-                "the boundary's roughness held at the lobe's, without an error"
+                "the boundary's roughness held at the lobe's, without an error".into()
             },
             if f.std_light.is_some() {
                 "; the held light's error (the joint fit's) carried into them by their sensitivity to its two angles"

@@ -936,8 +936,8 @@ fn medium_solve_in(
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
 /// out: measured (2026-12-06, α measured: 0.089) η 1.400 against 1.4; σa −1.8, −1.7, −0.8%; σs′
 /// +2.7, +2.4, +2.4%; residuals 0.86× the noise; the held-out sphere 3.86% by the medium, 7.31%
-/// by the CDRF on the same pixels; α 0.089 ± 0.010 from the lobe's 0.071 ± 0.014 (asserted
-/// within 0.025 of the truth). (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
+/// by the CDRF on the same pixels; α 0.089 ± 0.020 (the model's own 20% included) from the
+/// lobe's 0.071 ± 0.014 (asserted within 0.025 of the truth). (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
 /// σs′ −1.3, −2.0, −2.5%, held out 3.82%. With the deepest shadow fitted too: σa +1.4, −0.2, −1.2%,
 /// held out 3.96%; before the flux along the surface and η's combination: η 1.402, σa +5 to
 /// +6%, σs′ +7 to +9%, held out 4.21%.) Asserted: η within 0.015, σa and σs′ within 5%, residuals
@@ -989,8 +989,9 @@ fn the_medium_of_the_soap_renders() {
 /// The bundled physically based jade (../shared/data/pbr-jade, its five single-sphere photos:
 /// σt 2 /mm, albedo 0.90/0.96/0.92, η 1.62, GGX α 0.05), whose faint lobe the joint fit reads as
 /// α 0.13 ± 0.12: the medium fit measures the roughness from its pixels and, with it, σa and σs′.
-/// Measured (2026-12-06, 15 mm held out): α 0.049 ± 0.021; σa −5.7, −7.2, +1.4%; σs′ −5.3,
-/// −3.4, +2.4%; η 1.677 ± 0.103; every σa, σs′ and η error within 0.55 of its std. (With the
+/// Measured (2026-12-06, 15 mm held out): α 0.049 ± 0.023 (its error includes the model's own
+/// 20%, set from the wax and soap renders, not this one); σa −5.7, −7.2, +1.4%; σs′ −5.3, −3.4,
+/// +2.4%; η 1.677 ± 0.103; every σa, σs′, η and α error within 0.55 of its std. (With the
 /// lobe's α held: σa +48, +10, +74%, σs′ +93, +63, +133%.) Asserted: α within 0.005 of the
 /// truth, σa and σs′ within the 10%, each error within 1.5 of its stated std.
 #[test]
@@ -1013,7 +1014,8 @@ fn the_bundled_jade_is_measured_with_its_roughness() {
     let alpha_std = m.alpha_std.expect("α measured");
     println!("α {:.4} ± {alpha_std:.4} (truth {})", m.alpha, t.alpha);
     assert!((m.alpha - t.alpha).abs() < 0.005, "α {}", m.alpha);
-    let mut worst = (m.eta.value - t.media[0].eta).abs() / m.eta.std;
+    let mut worst = ((m.eta.value - t.media[0].eta).abs() / m.eta.std)
+        .max((m.alpha - t.alpha).abs() / alpha_std);
     for c in 0..3 {
         for (name, fitted, truth) in [
             ("σa", &m.sigma_a_per_mm, t.media[c].sigma_a),

@@ -3,7 +3,7 @@
 //! others' sensitivity to them, and what follows for the quantities a renderer takes (the
 //! transport mean free path, the surface's diffuse albedo), by their gradients in u.
 
-use super::problem::{Problem, ETA};
+use super::problem::{Problem, ALPHA, ETA};
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{DMatrix, DVector};
 
@@ -27,10 +27,18 @@ use nalgebra::{DMatrix, DVector};
 /// the noise, the jade-like ones at 1.9–8.1. η's term is not scaled: it weighs the pixels' η
 /// against the joint fit's, and on the jade-like renders, where the joint fit's η is the worse
 /// (0.1–0.3 off), scaling it moved η and σa further from the truth (docs/medium.md).
+///
+/// On the boundary's roughness α, where the fit measures it, the term is relative (on ln α),
+/// set the same way from the same eight sessions' whole solves (docs/medium.md, "α's model
+/// term"): their α is −2 to +35% off (soap's high on all four, 0.089–0.108 for 0.08), where
+/// its statistical error alone is 8–21% and soap-2's error was 2.84 of it. It is not scaled by
+/// the misfit: on the jade-like renders, at 1.9–7.7 of the noise, α's statistical error alone
+/// covered its error (within 1.0 of it), and scaled it would have been 40–150%.
 pub const MODEL_ERROR: ModelError = ModelError {
     sigma_a: 0.10,
     sigma_s_reduced: 0.12,
     eta: 0.07,
+    alpha: 0.20,
 };
 
 /// The model's own error per quantity ([`MODEL_ERROR`]).
@@ -39,6 +47,8 @@ pub struct ModelError {
     pub sigma_a: f64,
     pub sigma_s_reduced: f64,
     pub eta: f64,
+    /// Relative: on ln α.
+    pub alpha: f64,
 }
 
 pub(super) struct Errors {
@@ -97,6 +107,9 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
     for c in 0..3 {
         covariance[(c, c)] += (misfit * MODEL_ERROR.sigma_a).powi(2);
         covariance[(3 + c, 3 + c)] += (misfit * MODEL_ERROR.sigma_s_reduced).powi(2);
+    }
+    if problem.setup.alpha_std.is_some() {
+        covariance[(ALPHA, ALPHA)] += MODEL_ERROR.alpha.powi(2);
     }
     let eta_sensitivity = sensitivity_to_eta(&jac, m);
     match eta_held {
