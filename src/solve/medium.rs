@@ -55,6 +55,7 @@ pub(super) fn run(
                 opts.fit.eta_prior.1
             },
         ),
+        eta_alpha_slope: eta_alpha_slope(outcome),
         alpha: if outcome.specular {
             m.specular.alpha
         } else {
@@ -87,6 +88,27 @@ pub(super) fn run(
 fn alpha_prior_std(outcome: &Outcome) -> Option<f64> {
     let s = outcome.std[idx::ALPHA];
     (outcome.specular && s.is_finite() && s > 0.0).then_some(s)
+}
+
+/// How the joint fit's η follows its α: ρ σ_η/σ_α from its correlation and stated errors
+/// (its covariance's Σ_ηα/Σ_αα), 0 where either is not free or states no error.
+fn eta_alpha_slope(outcome: &Outcome) -> f64 {
+    let (e, a) = (idx::ETA, idx::ALPHA);
+    let (se, sa) = (outcome.std[e], outcome.std[a]);
+    if !(outcome.free[e] && outcome.free[a] && se > 0.0 && sa > 0.0) {
+        return 0.0;
+    }
+    let at = |k: usize| (0..k).filter(|&j| outcome.free[j]).count();
+    let c = &outcome.correlation;
+    if c.nrows() != outcome.free.iter().filter(|f| **f).count() {
+        return 0.0;
+    }
+    let slope = c[(at(e), at(a))] * se / sa;
+    if slope.is_finite() {
+        slope
+    } else {
+        0.0
+    }
 }
 
 /// The step (rad) the light is moved by for the medium's sensitivity to it: small beside the
@@ -188,7 +210,7 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     let ((j, js), (p, ps)) = (f.eta_sources.joint, f.eta_sources.pixels);
     let (eta, eta_std) = f.derived().eta;
     notes.push(format!(
-        "medium: η {eta:.3} ± {eta_std:.3} combines the joint fit's {j:.3} ± {js:.3} and the medium's pixels' {p:.3} ± {ps:.3} (their errors include each one's own error on physically based renders; docs/medium.md)"
+        "medium: η {eta:.3} ± {eta_std:.3} combines the joint fit's {j:.3} ± {js:.3} and the medium's pixels' {p:.3} ± {ps:.3} (their errors include each one's own error on physically based renders, and the joint fit's the shift its η–α correlation gives for its lobe's α against the α measured here; docs/medium.md)"
     ));
     match (f.alpha_std, f.alpha_lobe) {
         (Some(std), Some((lobe, lobe_std))) => notes.push(format!(

@@ -934,9 +934,10 @@ fn medium_solve_in(
 }
 
 /// Soap-like renders (σt 0.5 /mm, η 1.4, GGX α 0.08) with the irradiance, the 15 mm sphere held
-/// out: measured (2026-12-06, α measured: 0.089) η 1.400 against 1.4; σa −1.8, −1.7, −0.8%; σs′
-/// +2.7, +2.4, +2.4%; residuals 0.86× the noise; the held-out sphere 3.86% by the medium, 7.31%
-/// by the CDRF on the same pixels; α 0.089 ± 0.020 (the model's own 20% included) from the
+/// out: measured (2026-12-06, α measured: 0.088; the joint η's error widened by its α's
+/// difference) η 1.399 against 1.4; σa −1.6, −1.4, −0.6%; σs′ +2.5, +2.2, +2.2%; residuals 0.86×
+/// the noise; the held-out sphere 3.86% by the medium, 7.31%
+/// by the CDRF on the same pixels; α 0.088 ± 0.020 (the model's own 20% included) from the
 /// lobe's 0.071 ± 0.014 (asserted within 0.025 of the truth). (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
 /// σs′ −1.3, −2.0, −2.5%, held out 3.82%. With the deepest shadow fitted too: σa +1.4, −0.2, −1.2%,
 /// held out 3.96%; before the flux along the surface and η's combination: η 1.402, σa +5 to
@@ -990,8 +991,8 @@ fn the_medium_of_the_soap_renders() {
 /// σt 2 /mm, albedo 0.90/0.96/0.92, η 1.62, GGX α 0.05), whose faint lobe the joint fit reads as
 /// α 0.13 ± 0.12: the medium fit measures the roughness from its pixels and, with it, σa and σs′.
 /// Measured (2026-12-06, 15 mm held out): α 0.049 ± 0.023 (its error includes the model's own
-/// 20%, set from the wax and soap renders, not this one); σa −5.7, −7.2, +1.4%; σs′ −5.3, −3.4,
-/// +2.4%; η 1.677 ± 0.103; every σa, σs′, η and α error within 0.55 of its std. (With the
+/// 20%, set from the wax and soap renders, not this one); σa −6.2, −7.8, +0.8%; σs′ −4.9, −3.0,
+/// +2.8%; η 1.681 ± 0.104; every σa, σs′, η and α error within 0.59 of its std. (With the
 /// lobe's α held: σa +48, +10, +74%, σs′ +93, +63, +133%.) Asserted: α within 0.005 of the
 /// truth, σa and σs′ within the 10%, each error within 1.5 of its stated std.
 #[test]
@@ -1035,6 +1036,53 @@ fn the_bundled_jade_is_measured_with_its_roughness() {
     assert!(worst < 1.5, "{worst}");
 }
 
+/// A jade-like render whose highlight clips on every sphere (`datasets/pbr-seeds/jade-6`: σt 2,
+/// albedo 0.9/0.96/0.92, η 1.62, GGX α 0.05): the joint fit reads the clipped highlight's wings,
+/// which hold F(η)·α², as α 0.094 ± 0.031 and η 1.405 ± 0.069. The medium measures α 0.041, and
+/// the shift of η the joint fit's own η–α correlation gives for that difference (0.105) joins
+/// the joint η's error before it is combined with the pixels' 1.696 ± 0.104. Measured
+/// (2026-12-06, 15 mm held out): η 1.570 ± 0.144 (without the widening 1.494, red's σa +71%);
+/// σa +38, +3, +12%; σs′ +22, −10, −2%; every σa, σs′ and η error within 0.34 of its std.
+/// Asserted: η within 0.09 of the truth, each error within 1.5 of its stated std. (Red's σa is
+/// not asserted within the 10%: jade-6's detected outlines are off, docs/medium.md.)
+#[test]
+fn the_joint_fits_eta_gives_way_where_its_roughness_was_wrong() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-6");
+    let (_dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
+    let m = f.medium.as_ref().expect("fit.json's medium");
+    let sources = m.eta_sources.as_ref().expect("η's sources");
+    println!(
+        "η {:.3} ± {:.3} (truth {}): the joint fit's {:.3} ± {:.3}, the pixels' {:.3} ± {:.3}",
+        m.eta.value,
+        m.eta.std,
+        t.media[0].eta,
+        sources.joint.value,
+        sources.joint.std,
+        sources.pixels.value,
+        sources.pixels.std
+    );
+    assert!(
+        (m.eta.value - t.media[0].eta).abs() < 0.09,
+        "η {}",
+        m.eta.value
+    );
+    let mut worst = (m.eta.value - t.media[0].eta).abs() / m.eta.std;
+    for c in 0..3 {
+        for (name, fitted, truth) in [
+            ("σa", &m.sigma_a_per_mm, t.media[c].sigma_a),
+            ("σs′", &m.sigma_s_reduced_per_mm, t.media[c].sigma_s_reduced),
+        ] {
+            println!(
+                "channel {c}: {name} {:+.1}%",
+                100.0 * (fitted.value[c] / truth - 1.0)
+            );
+            worst = worst.max((fitted.value[c] - truth).abs() / fitted.std[c]);
+        }
+    }
+    println!("worst error {worst:.2} std");
+    assert!(worst < 1.5, "{worst}");
+}
+
 /// `workbench plot` of a medium fit draws the medium's own figures (its pixels and model
 /// against θ, its residuals against θ) beside the CDRF's, each linked from index.html.
 fn the_medium_fit_is_drawn(fit: &Path) {
@@ -1065,8 +1113,9 @@ fn the_medium_fit_is_drawn(fit: &Path) {
 /// σs′ was 2.11 of its stated std (2.61 with Snell's beams and the deepest shadow fitted;
 /// unscaled 4.67); with the held light's error carried into them (2026-12-06), 1.40 (σs′_r,
 /// 33% low, the light alone ± 23%); with the boundary's roughness measured (2026-12-06), 1.41
-/// (σs′_r, 26% low; σa within 9.7%). Asserted within 1.5, the coverage docs/uncertainty.md
-/// asks of the medium's errors (η, not asserted here, is 1.90 of its std, 1.502 ± 0.062: the
+/// (σs′_r, 26% low; σa within 9.7%); with the joint η's error widened by its α's difference from
+/// the medium's, 1.39. Asserted within 1.5, the coverage docs/uncertainty.md
+/// asks of the medium's errors (η, not asserted here, is 1.80 of its std, 1.504 ± 0.064: the
 /// light's error does not reach it, since it is held).
 #[test]
 fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
@@ -1828,6 +1877,7 @@ fn the_light_sensitivity_follows_refits() {
     let setup = Setup {
         light: l,
         eta_prior: (t.media[0].eta, 0.02),
+        eta_alpha_slope: 0.0,
         alpha: t.alpha,
         alpha_std: None,
         irradiance: Some(t.irradiance),
@@ -1926,6 +1976,7 @@ fn the_fit_from_the_truths_inputs() {
             let (a, b) = v.split_once(':').expect("ETA=value:std");
             (a.parse().unwrap(), b.parse().unwrap())
         }),
+        eta_alpha_slope: 0.0,
         alpha: alpha.0,
         alpha_std: alpha.1,
         irradiance: Some(t.irradiance),

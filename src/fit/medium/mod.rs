@@ -123,7 +123,7 @@ impl LightError {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EtaSources {
     /// The joint fit's (the highlights and the CDRF's transmissions), its std with
-    /// [`JOINT_ETA_ERROR`].
+    /// [`JOINT_ETA_ERROR`] and its α's difference from the medium's ([`joint_eta_std`]).
     pub joint: (f64, f64),
     /// The medium's pixels with σa and σs′ free, its std with the model's own error.
     pub pixels: (f64, f64),
@@ -256,7 +256,10 @@ pub fn fit(
         1.0 + eta_minus_one,
         eta_minus_one * free_errors.covariance[(ETA, ETA)].max(0.0).sqrt(),
     );
-    let joint = (setup.eta_prior.0, setup.eta_prior.1.hypot(JOINT_ETA_ERROR));
+    let joint = (
+        setup.eta_prior.0,
+        joint_eta_std(setup, problem::roughness(free.0.u.as_slice(), setup)),
+    );
     let eta = match crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]) {
         (v, s) if v.is_finite() && s.is_finite() => (v, s),
         _ => setup.eta_prior,
@@ -410,6 +413,24 @@ fn carry_light(
         })
         .collect();
     Some((s, std))
+}
+
+/// The joint fit's η's std where it is combined with the pixels': its stated one, its own
+/// error ([`JOINT_ETA_ERROR`]) and, where the medium measured the roughness at `alpha`, the
+/// shift of η the joint fit's own η–α correlation gives for the two roughnesses' difference
+/// (`setup.eta_alpha_slope` times it), in quadrature. The joint fit's η rests on its lobe's α
+/// where the highlight clips (its wings hold F(η)·α²): on the jade-like renders its α is 0.06–0.13
+/// for 0.05 and its η 0.1–0.3 low. Widened rather than moved: moved, it would carry the medium's
+/// own α error (soap's 0.01–0.03 high) into η (docs/medium.md, "The joint fit's η rests on its
+/// α").
+fn joint_eta_std(setup: &Setup, alpha: f64) -> f64 {
+    let moved = match setup.alpha_std {
+        Some(_) if setup.eta_alpha_slope.is_finite() => {
+            setup.eta_alpha_slope * (alpha - setup.alpha)
+        }
+        _ => 0.0,
+    };
+    setup.eta_prior.1.hypot(JOINT_ETA_ERROR).hypot(moved)
 }
 
 /// The joint fit's own error on η, added in quadrature to its stated std where the two are

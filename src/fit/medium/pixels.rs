@@ -11,6 +11,10 @@ pub struct Setup {
     pub light: Vector3<f64>,
     /// η's prior: the joint fit's η and its std.
     pub eta_prior: (f64, f64),
+    /// How the joint fit's η follows its α: Σ_ηα/Σ_αα of its covariance (0 where it states
+    /// none). A clipped highlight's wings hold F(η)·α², so a polished surface's η rests on its
+    /// lobe's α, and the medium's measured α moves it ([`super::fit`]).
+    pub eta_alpha_slope: f64,
     /// The boundary's GGX roughness: the lobe's α (0: smooth), held, or with `alpha_std` the
     /// prior of the α the fit measures.
     pub alpha: f64,

@@ -468,6 +468,7 @@ pub(super) mod tests {
         let setup = Setup {
             light: Vector3::z(),
             eta_prior: (1.44, 0.05),
+            eta_alpha_slope: 0.0,
             alpha: 0.11,
             alpha_std: Some(0.03),
             irradiance: None,
