@@ -95,17 +95,27 @@ fn alpha_prior_std(outcome: &Outcome) -> Option<f64> {
 fn eta_alpha_slope(outcome: &Outcome) -> f64 {
     let (e, a) = (idx::ETA, idx::ALPHA);
     let (se, sa) = (outcome.std[e], outcome.std[a]);
-    if !(outcome.free[e] && outcome.free[a] && se > 0.0 && sa > 0.0) {
-        return 0.0;
-    }
-    let at = |k: usize| (0..k).filter(|&j| outcome.free[j]).count();
-    let c = &outcome.correlation;
-    if c.nrows() != outcome.free.iter().filter(|f| **f).count() {
-        return 0.0;
-    }
-    let slope = c[(at(e), at(a))] * se / sa;
+    let slope = correlation(outcome, e, a) * se / sa;
     if slope.is_finite() {
         slope
+    } else {
+        0.0
+    }
+}
+
+/// The joint fit's correlation of parameters `a` and `b` (its matrix is over the free ones, in
+/// their order); 0 where either is not free or it is not finite.
+fn correlation(outcome: &Outcome, a: usize, b: usize) -> f64 {
+    let at = |k: usize| (0..k).filter(|&j| outcome.free[j]).count();
+    let c = &outcome.correlation;
+    let free = outcome.free.iter().filter(|f| **f).count();
+    let rho = if outcome.free[a] && outcome.free[b] && c.nrows() == free {
+        c[(at(a), at(b))]
+    } else {
+        0.0
+    };
+    if rho.is_finite() {
+        rho
     } else {
         0.0
     }
@@ -125,17 +135,9 @@ fn light_error(outcome: &Outcome, fitted: &[&SphereData]) -> Option<LightError> 
     if !(sa.is_finite() && se.is_finite() && sa > 0.0 && se > 0.0) {
         return None;
     }
-    // The correlation is over the free parameters, in their order; a light combined from the
-    // highlights' and the shading's estimates (not free in the last fit) has none.
-    let at = |k: usize| (0..k).filter(|&j| outcome.free[j]).count();
-    let c = &outcome.correlation;
-    let both_free = outcome.free[a] && outcome.free[e];
-    let rho = if both_free && c.nrows() == outcome.free.iter().filter(|f| **f).count() {
-        c[(at(a), at(e))]
-    } else {
-        0.0
-    };
-    let rho = if rho.is_finite() { rho } else { 0.0 };
+    // A light combined from the highlights' and the shading's estimates (not free in the last
+    // fit) has no correlation.
+    let rho = correlation(outcome, a, e);
     Some(LightError::around(
         fitted,
         outcome.params.light,
