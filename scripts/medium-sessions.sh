@@ -3,9 +3,10 @@
 # `workbench solve <fresh copy> --model medium --irradiance <truth's> --holdout 15` on
 # datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade (its five single-sphere photos)
 # and datasets/pbr-seeds/*, printing per session the errors against the truth (σa, σs′ per
-# channel; η; α and its |error|/std), the largest |error|/std over σa, σs′ and η, the residuals
-# over the noise, the held-out sphere's error (medium / CDRF), the profiles, the medium fit's
-# time and the whole solve's (fit.json's timings, and over decoding the photos).
+# channel; η and the two it combines; α and its |error|/std), the largest |error|/std over σa,
+# σs′ and η, the residuals over the noise, the held-out sphere's error (medium / CDRF), the
+# profiles, the medium fit's time and the whole solve's (fit.json's timings, and over decoding
+# the photos).
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -58,8 +59,12 @@ de = md["eta"]["value"] - eta
 worst = max(z("sigma_a_per_mm", sa) + z("sigma_s_reduced_per_mm", ss) + [abs(de) / md["eta"]["std"]])
 h = md.get("holdout") or {}
 al_std = md.get("alpha_std")
+nan = {"value": float("nan"), "std": float("nan")}
+src = md.get("eta_sources") or {"joint": nan, "pixels": nan}
 print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es[0]:+.1f} {es[1]:+.1f} {es[2]:+.1f}%  "
-      f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f})  "
+      f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f}; joint fit's "
+      f"{src['joint']['value']:.3f}±{src['joint']['std']:.3f}, pixels' "
+      f"{src['pixels']['value']:.3f}±{src['pixels']['std']:.3f})  "
       f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha}; "
       f"{abs(md['alpha'] - alpha) / al_std if al_std else float('nan'):.2f} std)  "
       f"err/std {worst:.2f}  res/noise {md['residual_over_noise']:.2f}  "
