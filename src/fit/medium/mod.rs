@@ -123,7 +123,7 @@ impl LightError {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EtaSources {
     /// The joint fit's (the highlights and the CDRF's transmissions), its std with
-    /// [`JOINT_ETA_ERROR`] and its α's difference from the medium's ([`joint_eta_std`]).
+    /// [`JOINT_ETA_ERROR`] and its α's difference from the medium's (`joint_eta_std`).
     pub joint: (f64, f64),
     /// The medium's pixels with σa and σs′ free, its std with the model's own error.
     pub pixels: (f64, f64),
@@ -220,10 +220,11 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 /// Fit the medium to `radii`'s pixels from `start` (u as [`MediumFit::u`]), in two stages:
 ///
 /// 1. σa, σs′ and η free, η's prior the joint fit's (`setup.eta_prior`);
-/// 2. η held at the inverse-variance mean of the joint fit's η and the first stage's, whose
-///    error is its statistical one and the model's own ([`MODEL_ERROR`]'s η) in quadrature
-///    (its error widened by √χ² when the two disagree beyond their errors), and σa, σs′ fitted
-///    again from the first stage's.
+/// 2. η held at the inverse-variance mean of the joint fit's η (its error `joint_eta_std`'s:
+///    widened where the first stage's α differs from the lobe's it rests on) and the first
+///    stage's, whose error is its statistical one and the model's own ([`MODEL_ERROR`]'s η) in
+///    quadrature (the mean's error widened by √χ² when the two disagree beyond their errors),
+///    and σa, σs′ fitted again from the first stage's.
 ///
 /// The pixels alone pull η by more than its statistical error says (0.04–0.10 low on the
 /// physically based wax and soap renders, where the joint fit's η is within 0.03), so their
