@@ -213,7 +213,7 @@ impl SphereDiffusion {
     /// Sources along each entry point's refracted beam. A point source of power p at radius r
     /// and polar angle Θ adds p (2l + 1)/(4πR²) P_l(cos Θ) [i_l(κr)/i_l(κR)]/den_l to the l-th
     /// coefficient (the shell's formula, per unit of its area). The entry points are integrated
-    /// in θ as the shell's f_l are; the ratios come from a table over r, interpolated cubically.
+    /// in θ as the shell's f_l are; each source's ratios by the recurrence ([`BeamLanes`]).
     fn beam(medium: &Medium, radius: f64, n: usize) -> SphereDiffusion {
         Self::beam_cut(medium, radius, n, Cut::FIT, &Boundary::smooth(medium.eta))
     }
@@ -242,17 +242,16 @@ impl SphereDiffusion {
             .min(cut.roll_off.map_or(8000, |r| r.1));
         let x = kappa * radius;
         let ratio_r = bessel_ratios(x, order + 1);
-        // ln(i_l(κr)/i_l(κR)) on a grid of r from the deepest source out to the shallowest.
-        // Beams pass near the centre on small spheres; the table stops at 0.05 R, where i_0 is
-        // flat and the higher orders' ratios negligible.
-        let deepest = s_nodes[n.clamp(1, 4) - 1] / st;
-        let (r_lo, r_hi) = ((radius - deepest).max(0.05 * radius), radius - shallowest);
-        const ROWS: usize = 160;
-        let rows: Vec<f64> = (0..=ROWS)
-            .map(|k| kappa * (r_lo + (r_hi - r_lo) * k as f64 / ROWS as f64))
-            .collect();
-        let table = log_i_ratios(&rows, x, order);
-        let mut c = vec![0.0; order + 1];
+        // Beams pass near the centre on small spheres; their sources are held at 0.05 R, where
+        // i_0 is flat and the higher orders' ratios negligible.
+        let (r_lo, r_hi) = (0.05 * radius, radius - shallowest);
+        let outer = Outer::at(x, &ratio_r, order);
+        let empty = BeamLanes {
+            cos_big: [1.0; 4],
+            x: [kappa * r_lo; 4],
+            power: [0.0; 4],
+        };
+        let mut beams = vec![];
         // The entry points resolve the orders kept whole; those rolled off need no more.
         for (theta_e, w) in entry_nodes(cut.roll_off.map_or(order, |r| order.min(r.0))) {
             let (sin_e, cos_e) = theta_e.sin_cos();
@@ -267,9 +266,9 @@ impl SphereDiffusion {
             );
             // The beam crosses the sphere in a chord 2R cos θt; a node beyond it has left.
             let chord = 2.0 * radius * cos_t;
-            // The beam's sources (at most four) in lanes: each its cos Θ, its four table rows
-            // and their cubic Lagrange weights, its power (0: an empty lane, or past the chord).
-            let mut lanes = BeamLanes::default();
+            // The beam's sources (at most four) in lanes: each its cos Θ, its κr and its power
+            // (0: an empty lane, or past the chord).
+            let mut lanes = empty;
             for (j, (&sn, &sw)) in s_nodes.iter().zip(s_weights.iter()).enumerate() {
                 let s = sn / st;
                 if s >= chord {
@@ -278,27 +277,22 @@ impl SphereDiffusion {
                 let p = (radius * sin_e + s * dir.0, radius * cos_e + s * dir.1);
                 let r_true = (p.0 * p.0 + p.1 * p.1).sqrt();
                 lanes.cos_big[j] = (p.1 / r_true.max(1e-300)).clamp(-1.0, 1.0);
-                let r = r_true.clamp(r_lo, r_hi);
-                let at = (r - r_lo) / (r_hi - r_lo) * ROWS as f64;
-                // Cubic Lagrange through four rows (linear moved M by up to 1e-5 as the rows
-                // shifted with σt′, which the fit's differences magnified to 2–4% of a column).
-                lanes.first[j] = (at.floor() as usize).clamp(1, ROWS - 2) - 1;
-                let t = at - lanes.first[j] as f64;
-                lanes.w[j] = [
-                    -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0,
-                    t * (t - 2.0) * (t - 3.0) / 2.0,
-                    -t * (t - 1.0) * (t - 3.0) / 2.0,
-                    t * (t - 1.0) * (t - 2.0) / 6.0,
-                ];
+                lanes.x[j] = kappa * r_true.clamp(r_lo, r_hi);
                 lanes.power[j] = entering * sw;
             }
-            lanes.add_to(&mut c, &table, order);
+            beams.push(lanes);
+        }
+        let mut c = vec![f64x4::ZERO; order + 1];
+        let mut scratch = vec![[f64x4::ZERO; GROUPS]; order + 1];
+        for chunk in beams.chunks(GROUPS) {
+            let groups = std::array::from_fn(|k| chunk.get(k).copied().unwrap_or(empty));
+            BeamLanes::add_to(&groups, &mut c, &outer, &mut scratch);
         }
         let coefficients = c
             .iter()
             .enumerate()
             .map(|(l, v)| {
-                medium.reduced_albedo() * v * (2 * l + 1) as f64 * cut.window(l)
+                medium.reduced_albedo() * v.reduce_add() * (2 * l + 1) as f64 * cut.window(l)
                     / 2.0
                     / (1.0 + h * (l as f64 / x + ratio_r[l]))
             })
@@ -316,45 +310,85 @@ impl SphereDiffusion {
     }
 }
 
-/// One entry point's beam sources side by side, one a lane: their Legendre recurrences run
-/// together ([`legendre`] in lanes: one recurrence's chain of dependent products was what a
-/// source's orders waited on) and their ratios are exponentiated in lanes.
-#[derive(Clone, Copy, Debug, Default)]
+/// How many entry points' lanes [`BeamLanes::add_to`] runs at once: each a chain of dependent
+/// divisions (the ratios' backward recurrence) and products, which one alone waits on. Measured
+/// on a jade-like 35 mm sphere: 1 group 6.8 ms a profile, 2 4.0 ms, 3 3.3 ms, 4 2.9 ms, 8 3.0 ms.
+const GROUPS: usize = 4;
+
+/// One entry point's beam sources side by side, one a lane: their Legendre recurrences and
+/// their Bessel ratios run together (one recurrence's chain of dependent operations is what a
+/// source's orders wait on).
+#[derive(Clone, Copy, Debug)]
 struct BeamLanes {
     cos_big: [f64; 4],
-    /// The first of the four table rows around each source's radius, and their weights.
-    first: [usize; 4],
-    w: [[f64; 4]; 4],
+    /// κr of each source.
+    x: [f64; 4],
     /// The source's power (entering light × its Laguerre weight); 0 leaves the lane out.
     power: [f64; 4],
 }
 
+/// The sphere's own side of the ratios i_l(κr)/i_l(κR): ln i_0(κR) and 1/r_l(κR) per order.
+struct Outer {
+    ln_i0: f64,
+    inverse_ratios: Vec<f64>,
+    order: usize,
+}
+
+impl Outer {
+    fn at(x: f64, ratios: &[f64], order: usize) -> Outer {
+        Outer {
+            ln_i0: ln_i0(x),
+            inverse_ratios: ratios[..=order].iter().map(|r| 1.0 / r).collect(),
+            order,
+        }
+    }
+}
+
 impl BeamLanes {
-    /// c_l += Σ_sources power · P_l(cos Θ) · i_l(κr)/i_l(κR) for l ≤ `order`, each source
-    /// until its ratio falls below e^{−40}.
-    fn add_to(&self, c: &mut [f64], table: &[Vec<f64>], order: usize) {
-        let mut alive = self.power.map(|p| p != 0.0);
-        let power = f64x4::new(self.power);
-        let mut p_l = legendre(f64x4::new(self.cos_big));
-        for (l, cl) in c.iter_mut().enumerate().take(order + 1) {
-            let q: [f64; 4] = std::array::from_fn(|j| {
-                if !alive[j] {
-                    return -1e3; // e^q is 0 in lanes
-                }
-                let (rows, w) = (&table[self.first[j]..self.first[j] + 4], &self.w[j]);
-                let q =
-                    w[0] * rows[0][l] + w[1] * rows[1][l] + w[2] * rows[2][l] + w[3] * rows[3][l];
-                if q < -40.0 {
-                    alive[j] = false;
-                    return -1e3;
-                }
-                q
-            });
-            if !alive.iter().any(|a| *a) {
+    /// c_l += Σ_sources power · P_l(cos Θ) · i_l(κr)/i_l(κR) for l ≤ the order, until every
+    /// source's ratio falls below e^{−40}, for `K` groups of lanes at once (their recurrences,
+    /// each a chain of dependent divisions or products, interleaved). The ratio is i_0's times
+    /// Π_{m<l} r_m(κr)/r_m(κR), each source's r_m by [`bessel_ratios`]'s backward recurrence
+    /// (kept in `scratch`).
+    fn add_to<const K: usize>(
+        groups: &[BeamLanes; K],
+        c: &mut [f64x4],
+        outer: &Outer,
+        scratch: &mut [[f64x4; K]],
+    ) {
+        let order = outer.order;
+        let inverse_x: [f64x4; K] = std::array::from_fn(|k| f64x4::ONE / f64x4::new(groups[k].x));
+        let largest = groups
+            .iter()
+            .flat_map(|g| g.x)
+            .fold(0.0f64, f64::max)
+            .ceil() as usize;
+        let mut r = [f64x4::ZERO; K];
+        for l in (1..=order + 40 + largest).rev() {
+            let m = (2 * l + 1) as f64;
+            for k in 0..K {
+                r[k] = f64x4::ONE / (inverse_x[k] * m + r[k]);
+            }
+            if l - 1 <= order {
+                scratch[l - 1] = r;
+            }
+        }
+        let power: [f64x4; K] = std::array::from_fn(|k| f64x4::new(groups[k].power));
+        let mut ratio: [f64x4; K] =
+            std::array::from_fn(|k| (f64x4::new(groups[k].x.map(ln_i0)) - outer.ln_i0).exp());
+        let mut p_l: [_; K] = std::array::from_fn(|k| legendre(f64x4::new(groups[k].cos_big)));
+        let dead = (-40f64).exp();
+        for l in 0..=order {
+            let mut sum = c[l];
+            for k in 0..K {
+                let p = p_l[k].next().expect("endless");
+                sum += power[k] * p * ratio[k];
+                ratio[k] = ratio[k] * scratch[l][k] * outer.inverse_ratios[l];
+            }
+            c[l] = sum;
+            if l % 16 == 15 && ratio.iter().all(|q| q.to_array().iter().all(|v| *v < dead)) {
                 break;
             }
-            let p = p_l.next().expect("endless");
-            *cl += (power * p * f64x4::new(q).exp()).reduce_add();
         }
     }
 }
@@ -504,12 +538,13 @@ fn log_i_ratio(x_in: f64, x_out: f64, order: usize) -> Vec<f64> {
     log_i_ratios(&[x_in], x_out, order).remove(0)
 }
 
+/// ln i_0(x) = ln(sinh x / x) = x − ln(2x) + ln(1 − e^{−2x}), stable for every x > 0.
+fn ln_i0(x: f64) -> f64 {
+    x - (2.0 * x).ln() + (-(-2.0 * x).exp()).ln_1p()
+}
+
 /// [`log_i_ratio`] for several `xs_in` against one `x_out`, whose ratios are computed once.
 fn log_i_ratios(xs_in: &[f64], x_out: f64, order: usize) -> Vec<Vec<f64>> {
-    let ln_i0 = |x: f64| {
-        // ln(sinh x / x) = x − ln(2x) + ln(1 − e^{−2x}), stable for every x > 0.
-        x - (2.0 * x).ln() + (-(-2.0 * x).exp()).ln_1p()
-    };
     let ro = bessel_ratios(x_out, order);
     xs_in
         .iter()
@@ -623,6 +658,42 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Each lane's sum against the scalar forms, one source at a time: power · P_l(cos Θ) ·
+    /// exp(ln i_l(κr) − ln i_l(κR)) by [`legendre`] and [`log_i_ratio`] (ln i_0 and the ratios
+    /// summed in logs), on five groups of lanes (two empty) with sources from the centre's 0.05
+    /// to 0.999 of the radius. Measured: within 2.6e-16 of the largest term at every order.
+    #[test]
+    fn the_lanes_sum_each_sources_series() {
+        let (x_out, order) = (30.0, 500);
+        let outer = Outer::at(x_out, &bessel_ratios(x_out, order + 1), order);
+        let lanes = |k: usize| BeamLanes {
+            cos_big: std::array::from_fn(|j| 1.0 - 0.37 * (k * 4 + j) as f64 / 20.0),
+            x: std::array::from_fn(|j| x_out * (0.05 + 0.949 * ((k * 4 + j) as f64 / 19.0).sqrt())),
+            power: std::array::from_fn(|j| if k < 3 { 0.5 + j as f64 } else { 0.0 }),
+        };
+        let groups: [BeamLanes; 5] = std::array::from_fn(lanes);
+        let mut c = vec![f64x4::ZERO; order + 1];
+        let mut scratch = vec![[f64x4::ZERO; 5]; order + 1];
+        BeamLanes::add_to(&groups, &mut c, &outer, &mut scratch);
+        let mut expected = vec![0.0; order + 1];
+        for g in &groups {
+            for j in 0..4 {
+                let q = log_i_ratio(g.x[j], x_out, order);
+                for (l, p) in legendre(g.cos_big[j]).take(order + 1).enumerate() {
+                    expected[l] += g.power[j] * p * q[l].exp();
+                }
+            }
+        }
+        let scale = expected.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let worst = c
+            .iter()
+            .zip(&expected)
+            .map(|(a, b)| (a.reduce_add() - b).abs() / scale)
+            .fold(0.0, f64::max);
+        println!("largest difference {worst:.1e} of the largest term");
+        assert!(worst < 1e-15, "{worst}");
     }
 
     /// M with its orders rolled off ([`ROLL_OFF`]) against the full series, on dense spheres
