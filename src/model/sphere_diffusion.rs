@@ -179,7 +179,32 @@ impl SphereDiffusion {
 
     /// M(θ) tabulated every half degree from 0 to 180°, for many pixels.
     pub fn tabulate(&self) -> Tabulated {
-        Tabulated::from_fn(|c| self.m(c))
+        Tabulated::from_nodes(self.m_at_nodes())
+    }
+
+    /// [`Self::m`] at the table's nodes, sixteen at a time: four in lanes, four groups of lanes
+    /// interleaved (each node's series is a chain of dependent products; summed in the same order
+    /// as [`Self::m`], so the same to the last bit).
+    fn m_at_nodes(&self) -> Vec<f64> {
+        const K: usize = 4;
+        let cosines: Vec<f64> = (0..=360).map(Tabulated::node_cosine).collect();
+        let mut out = Vec::with_capacity(cosines.len());
+        for chunk in cosines.chunks(4 * K) {
+            let lane = |k: usize| {
+                f64x4::from(std::array::from_fn(|j| {
+                    *chunk.get(4 * k + j).unwrap_or(&1.0)
+                }))
+            };
+            let mut p: [_; K] = std::array::from_fn(|k| legendre(lane(k)));
+            let mut sum = [f64x4::ZERO; K];
+            for &c in &self.coefficients {
+                for k in 0..K {
+                    sum[k] += p[k].next().expect("endless") * c;
+                }
+            }
+            out.extend(sum.iter().flat_map(|s| s.to_array()).take(chunk.len()));
+        }
+        out
     }
 
     /// The coefficients with the sources placed by `sources`.
@@ -404,9 +429,16 @@ pub struct Tabulated {
 impl Tabulated {
     /// Any M(θ), given as a function of cos θ, every half degree.
     pub fn from_fn(m_of: impl Fn(f64) -> f64) -> Tabulated {
-        let m: Vec<f64> = (0..=360)
-            .map(|k| m_of((k as f64 * 0.5).to_radians().cos()))
-            .collect();
+        Self::from_nodes((0..=360).map(|k| m_of(Self::node_cosine(k))).collect())
+    }
+
+    /// cos θ at node k (θ = k/2 degrees).
+    fn node_cosine(k: usize) -> f64 {
+        (k as f64 * 0.5).to_radians().cos()
+    }
+
+    /// A table from M at its nodes ([`Self::node_cosine`]), with d ln M/dθ by differences.
+    fn from_nodes(m: Vec<f64>) -> Tabulated {
         // Central differences of ln M at the nodes (one-sided at 180°, 0 at the pole by symmetry).
         let ln = |k: usize| m[k].max(1e-300).ln();
         let h = 0.5f64.to_radians();
