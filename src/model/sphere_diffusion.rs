@@ -408,13 +408,9 @@ impl BeamLanes {
             _ => outer.order,
         };
         let inverse_x: [f64x4; K] = std::array::from_fn(|k| f64x4::ONE / f64x4::new(groups[k].x));
-        let largest = groups
-            .iter()
-            .flat_map(|g| g.x)
-            .fold(0.0f64, f64::max)
-            .ceil() as usize;
+        let largest = groups.iter().flat_map(|g| g.x).fold(0.0f64, f64::max);
         let mut r = [f64x4::ZERO; K];
-        for l in (1..=order + 40 + largest).rev() {
+        for l in (1..=recurrence_start(largest, order)).rev() {
             let m = (2 * l + 1) as f64;
             for k in 0..K {
                 r[k] = f64x4::ONE / (inverse_x[k] * m + r[k]);
@@ -578,10 +574,9 @@ fn robin_h(medium: &Medium) -> f64 {
 /// r_{l−1} = 1/((2l + 1)/x + r_l), started far above `order` (stable: the ratios of the
 /// regular solution are the minimal solution of this recurrence).
 fn bessel_ratios(x: f64, order: usize) -> Vec<f64> {
-    let start = order + 40 + x.ceil() as usize;
     let mut r = 0.0;
     let mut out = vec![0.0; order + 1];
-    for l in (1..=start).rev() {
+    for l in (1..=recurrence_start(x, order)).rev() {
         r = 1.0 / ((2 * l + 1) as f64 / x + r);
         if l - 1 <= order {
             out[l - 1] = r;
@@ -590,33 +585,29 @@ fn bessel_ratios(x: f64, order: usize) -> Vec<f64> {
     out
 }
 
+/// The order the backward recurrence for r_l(x), l ≤ `order`, starts from: far enough above
+/// `order` (and above x, where the ratios turn from about 1 to about x/(2l)) that the start's
+/// error has died out by `order` ([`bessel_ratios`], [`BeamLanes::add_to`]).
+fn recurrence_start(x: f64, order: usize) -> usize {
+    order + 40 + x.ceil() as usize
+}
+
 /// ln(i_l(x_in)/i_l(x_out)) for l ≤ `order`: ln i_0 = ln(sinh x / x), then the ratios.
 fn log_i_ratio(x_in: f64, x_out: f64, order: usize) -> Vec<f64> {
-    log_i_ratios(&[x_in], x_out, order).remove(0)
+    let (ri, ro) = (bessel_ratios(x_in, order), bessel_ratios(x_out, order));
+    let mut acc = ln_i0(x_in) - ln_i0(x_out);
+    (0..=order)
+        .map(|l| {
+            let v = acc;
+            acc += ri[l].ln() - ro[l].ln();
+            v
+        })
+        .collect()
 }
 
 /// ln i_0(x) = ln(sinh x / x) = x − ln(2x) + ln(1 − e^{−2x}), stable for every x > 0.
 fn ln_i0(x: f64) -> f64 {
     x - (2.0 * x).ln() + (-(-2.0 * x).exp()).ln_1p()
-}
-
-/// [`log_i_ratio`] for several `xs_in` against one `x_out`, whose ratios are computed once.
-fn log_i_ratios(xs_in: &[f64], x_out: f64, order: usize) -> Vec<Vec<f64>> {
-    let ro = bessel_ratios(x_out, order);
-    xs_in
-        .iter()
-        .map(|&x_in| {
-            let ri = bessel_ratios(x_in, order);
-            let mut acc = ln_i0(x_in) - ln_i0(x_out);
-            (0..=order)
-                .map(|l| {
-                    let v = acc;
-                    acc += ri[l].ln() - ro[l].ln();
-                    v
-                })
-                .collect()
-        })
-        .collect()
 }
 
 #[cfg(test)]
