@@ -349,18 +349,20 @@ pub(crate) fn degenerate_check(fit: Fit, stages: &mut [Stage], notes: &mut Vec<S
 pub(crate) fn poorly_determined(f: &Fit) -> Vec<usize> {
     let p = f.params.to_vec();
     (0..N_PARAMS)
-        .filter(|&k| f.free[k])
-        .filter(|&k| {
-            let s = f.std[k];
-            !s.is_finite()
-                || match k {
-                    idx::ETA => s > 0.5,
-                    idx::AZIMUTH | idx::ELEVATION => s > 10f64.to_radians(),
-                    idx::SIGMA_EXPONENT | idx::ALBEDO_CURVATURE => s > 1.0,
-                    _ => s > 0.5 * p[k].abs(),
-                }
-        })
+        .filter(|&k| f.free[k] && beyond_range(k, p[k], f.std[k]))
         .collect()
+}
+
+/// Whether a standard error `std` of parameter `k` at `value` is not finite or larger than the
+/// parameter's plausible range ([`poorly_determined`]'s rule).
+pub(crate) fn beyond_range(k: usize, value: f64, std: f64) -> bool {
+    !std.is_finite()
+        || match k {
+            idx::ETA => std > 0.5,
+            idx::AZIMUTH | idx::ELEVATION => std > 10f64.to_radians(),
+            idx::SIGMA_EXPONENT | idx::ALBEDO_CURVATURE => std > 1.0,
+            _ => std > 0.5 * value.abs(),
+        }
 }
 
 /// The Particle Data Group's scale factor for a parameter with a prior: the prior (m_p ± σ_p)

@@ -6,6 +6,7 @@
 use super::baseline::baseline;
 use super::choice::choose_extensions;
 use super::combine::combine_lights;
+use super::identify;
 use super::jackknife::{jackknife_linear, jackknife_refit, Jackknife};
 use super::settings::{
     ExtensionChoice, Extensions, JackknifeMethod, Measured, Settings, Setup,
@@ -93,6 +94,8 @@ pub fn fit_session(
     notes.extend(jf.notes.iter().cloned());
     skipped.extend(reduction_skips(&jf));
     let std = stated_std(&jf, jack.as_ref(), &held.light_shift);
+    let poorly = poorly_stated(&jf.fit.params.to_vec(), &jf.fit.free, &std, notes);
+    notes.extend(poorly);
     let light_fit = if held.combined {
         "prior, then combined".into()
     } else {
@@ -222,9 +225,61 @@ fn stated_std(
     })
 }
 
+/// Free parameters whose stated error is beyond their plausible range
+/// ([`identify::beyond_range`]) where the fit's own was not: the radii's jackknife, the prior's
+/// tension or the light's error widened it. Each gets the note the fit's own error would have
+/// given ([`identify::hold`]), unless a note names it so already.
+fn poorly_stated(
+    params: &[f64],
+    free: &[bool; N_PARAMS],
+    std: &[f64; N_PARAMS],
+    notes: &[String],
+) -> Vec<String> {
+    (0..N_PARAMS)
+        .filter(|&k| free[k] && identify::beyond_range(k, params[k], std[k]))
+        .filter(|&k| {
+            let said = format!("{} is poorly determined", PARAM_NAMES[k]);
+            !notes.iter().any(|n| n.starts_with(&said))
+        })
+        .map(|k| {
+            format!(
+                "{} is poorly determined (std {:.3} for {:.4}, with the radii's jackknife and the light's error)",
+                PARAM_NAMES[k], std[k], params[k]
+            )
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
-    use super::combination_phases;
+    use super::{combination_phases, poorly_stated};
+    use crate::model::{idx, N_PARAMS};
+
+    /// A stated error past the parameter's plausible range gets the fit's own note (σ0_r ± 1.99
+    /// mm for 2.20, more than half of it; η ± 0.6), once: not for one the fit already named, a
+    /// held parameter, or one within its range (σ0_g ± 0.7 for 3.4).
+    #[test]
+    fn a_stated_error_past_its_range_is_said() {
+        let mut params = [0.0; N_PARAMS];
+        let mut std = [0.0; N_PARAMS];
+        let mut free = [false; N_PARAMS];
+        for (k, p, s) in [
+            (idx::SIGMA0, 2.20, 1.99),
+            (idx::SIGMA0 + 1, 3.44, 0.74),
+            (idx::SIGMA0 + 2, 2.71, 1.50),
+            (idx::ETA, 1.45, 0.6),
+            (idx::KS, 0.0, f64::INFINITY),
+        ] {
+            params[k] = p;
+            std[k] = s;
+            free[k] = k != idx::KS;
+        }
+        let said = vec!["sigma0_b is poorly determined (std inf for 2.7100)".to_string()];
+        let notes = poorly_stated(&params, &free, &std, &said);
+        assert_eq!(notes.len(), 2, "{notes:?}");
+        assert!(notes[0].starts_with("sigma0_r is poorly determined (std 1.990 for 2.2000"));
+        assert!(notes[1].starts_with("eta is poorly determined (std 0.600"));
+    }
 
     fn phases(v: &[(&str, f64)]) -> Vec<(String, f64)> {
         v.iter().map(|(n, s)| (n.to_string(), *s)).collect()
