@@ -243,7 +243,7 @@ fn poorly_stated(
         })
         .map(|k| {
             format!(
-                "{} is poorly determined (std {:.3} for {:.4}, with the radii's jackknife and the light's error)",
+                "{} is poorly determined (std {:.3} for {:.4} as stated: the fit's own error widened by the radii's jackknife, a prior's tension or the light's error)",
                 PARAM_NAMES[k], std[k], params[k]
             )
         })
