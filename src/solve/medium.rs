@@ -6,6 +6,7 @@ use super::load::Loaded;
 use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
 use crate::error::{Error, Result};
+use crate::fit::joint::identify::PLAUSIBLE_RELATIVE;
 use crate::fit::medium::{self, LightError, MediumFit, Radius, Setup, MODEL_ERROR};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{
@@ -209,6 +210,14 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     if !f.converged {
         notes.push("medium: the fit did not converge; its values are where it stopped".into());
     }
+    let d = f.derived();
+    for (name, q) in [("σa", d.sigma_a), ("σs′", d.sigma_s_reduced)] {
+        if let Some(wide) = poorly_determined(&q) {
+            notes.push(format!(
+                "medium: {name} is poorly determined ({wide}): an error bar past half its value measures the error, not the value"
+            ));
+        }
+    }
     let ((j, js), (p, ps)) = (f.eta_sources.joint, f.eta_sources.pixels);
     let (eta, eta_std) = f.derived().eta;
     notes.push(format!(
@@ -236,6 +245,22 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
             f.radii.len()
         ));
     }
+}
+
+/// The channels of `q` whose stated error is past [`PLAUSIBLE_RELATIVE`] of the value (not
+/// finite included), each with its relative error, as "red ± 110%, blue ± 64%"; None if none.
+fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
+    let wide: Vec<String> = (0..3)
+        .filter(|&c| !(q.std[c] <= PLAUSIBLE_RELATIVE * q.value[c].abs()))
+        .map(|c| {
+            format!(
+                "{} ± {:.0}%",
+                ["red", "green", "blue"][c],
+                100.0 * q.std[c] / q.value[c].abs()
+            )
+        })
+        .collect();
+    (!wide.is_empty()).then(|| wide.join(", "))
 }
 
 fn value((value, std): (f64, f64)) -> ValueJson {

@@ -907,6 +907,30 @@ fn medium_solve(
     (dir, t, f)
 }
 
+/// Whether the note that σa or σs′ is poorly determined is there exactly where fit.json states a
+/// channel's error past half its value; returns how many such notes.
+fn poorly_determined_is_said(f: &workbench::formats::fit::FitFile) -> usize {
+    let m = f.medium.as_ref().expect("fit.json's medium");
+    let mut said = 0;
+    for (name, q) in [
+        ("σa", &m.sigma_a_per_mm),
+        ("σs′", &m.sigma_s_reduced_per_mm),
+    ] {
+        let wide = (0..3).any(|c| !(q.std[c] <= 0.5 * q.value[c].abs()));
+        let note = f
+            .notes
+            .iter()
+            .any(|n| n.starts_with(&format!("medium: {name} is poorly determined")));
+        assert_eq!(
+            note, wide,
+            "{name}: {:?} ± {:?}, notes {:?}",
+            q.value, q.std, f.notes
+        );
+        said += usize::from(note);
+    }
+    said
+}
+
 /// [`medium_solve`] on a session copied already.
 fn medium_solve_in(
     dir: &tempfile::TempDir,
@@ -1081,6 +1105,8 @@ fn the_joint_fits_eta_gives_way_where_its_roughness_was_wrong() {
     }
     println!("worst error {worst:.2} std");
     assert!(worst < 1.5, "{worst}");
+    // Its stated errors are 79–95% of σa and σs′ (the misfit scales the model's own): said.
+    assert_eq!(poorly_determined_is_said(&f), 2);
 }
 
 /// `workbench plot` of a medium fit draws the medium's own figures (its pixels and model
@@ -1145,6 +1171,8 @@ fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
         m.residual_over_noise
     );
     assert!(worst < 1.5, "{worst}");
+    // Its stated errors are 23–25% of σa and σs′: no note calls them poorly determined.
+    assert_eq!(poorly_determined_is_said(&f), 0);
     mitsuba_reads_and_renders_the_export(&dir.path().join("fit.json"), m);
 }
 
