@@ -251,7 +251,7 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
 /// finite included), each with its relative error, as "red ± 110%, blue ± 64%"; None if none.
 fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
     let wide: Vec<String> = (0..3)
-        .filter(|&c| !(q.std[c] <= PLAUSIBLE_RELATIVE * q.value[c].abs()))
+        .filter(|&c| q.std[c].is_nan() || q.std[c] > PLAUSIBLE_RELATIVE * q.value[c].abs())
         .map(|c| {
             format!(
                 "{} ± {:.0}%",

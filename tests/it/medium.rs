@@ -916,7 +916,7 @@ fn poorly_determined_is_said(f: &workbench::formats::fit::FitFile) -> usize {
         ("σa", &m.sigma_a_per_mm),
         ("σs′", &m.sigma_s_reduced_per_mm),
     ] {
-        let wide = (0..3).any(|c| !(q.std[c] <= 0.5 * q.value[c].abs()));
+        let wide = (0..3).any(|c| q.std[c].is_nan() || q.std[c] > 0.5 * q.value[c].abs());
         let note = f
             .notes
             .iter()
