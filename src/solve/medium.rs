@@ -6,7 +6,7 @@ use super::load::Loaded;
 use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
 use crate::error::{Error, Result};
-use crate::fit::joint::identify::PLAUSIBLE_RELATIVE;
+use crate::fit::joint::identify::beyond_relative_range;
 use crate::fit::medium::{self, LightError, MediumFit, Radius, Setup, MODEL_ERROR};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{
@@ -247,11 +247,12 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     }
 }
 
-/// The channels of `q` whose stated error is past [`PLAUSIBLE_RELATIVE`] of the value (not
-/// finite included), each with its relative error, as "red ± 110%, blue ± 64%"; None if none.
+/// The channels of `q` whose stated error is past the joint fit's plausible range for a positive
+/// parameter ([`beyond_relative_range`]), each with its relative error, as "red ± 110%, blue ±
+/// 64%"; None if none.
 fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
     let wide: Vec<String> = (0..3)
-        .filter(|&c| q.std[c].is_nan() || q.std[c] > PLAUSIBLE_RELATIVE * q.value[c].abs())
+        .filter(|&c| beyond_relative_range(q.value[c], q.std[c]))
         .map(|c| {
             format!(
                 "{} ± {:.0}%",

@@ -361,14 +361,19 @@ pub(crate) fn beyond_range(k: usize, value: f64, std: f64) -> bool {
             idx::ETA => std > 0.5,
             idx::AZIMUTH | idx::ELEVATION => std > 10f64.to_radians(),
             idx::SIGMA_EXPONENT | idx::ALBEDO_CURVATURE => std > 1.0,
-            _ => std > PLAUSIBLE_RELATIVE * value.abs(),
+            _ => beyond_relative_range(value, std),
         }
 }
 
-/// The largest error a positive quantity may have, relative to it, and still be measured: past
-/// it the error bar, not the value, is what the data say ([`beyond_range`]; the medium fit's σa
-/// and σs′ by the same rule).
-pub const PLAUSIBLE_RELATIVE: f64 = 0.5;
+/// Whether a positive quantity's standard error is not finite or past [`PLAUSIBLE_RELATIVE`] of
+/// it: the error bar, not the value, is then what the data say ([`beyond_range`]; the medium
+/// fit's σa and σs′ by the same rule).
+pub fn beyond_relative_range(value: f64, std: f64) -> bool {
+    !std.is_finite() || std > PLAUSIBLE_RELATIVE * value.abs()
+}
+
+/// The largest error a positive quantity may have, relative to it, and still be measured.
+const PLAUSIBLE_RELATIVE: f64 = 0.5;
 
 /// The Particle Data Group's scale factor for a parameter with a prior: the prior (m_p ± σ_p)
 /// and the data alone (m_d ± σ_d, recovered from the posterior m ± σ through
