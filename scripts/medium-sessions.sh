@@ -4,7 +4,8 @@
 # datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade (its five single-sphere photos)
 # and datasets/pbr-seeds/*, printing per session the errors against the truth (σa, σs′ per
 # channel; η and the two it combines; α and its |error|/std), the largest |error|/std over σa,
-# σs′ and η, the residuals over the noise, the held-out sphere's error (medium / CDRF), the
+# σs′ and η, the largest share of σa's and σs′'s values the light's and the outlines' errors alone
+# give, the residuals over the noise, the held-out sphere's error (medium / CDRF), the
 # profiles, the medium fit's time and the whole solve's (fit.json's timings, and over decoding
 # the photos).
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
@@ -61,13 +62,18 @@ h = md.get("holdout") or {}
 al_std = md.get("alpha_std")
 nan = {"value": float("nan"), "std": float("nan")}
 src = md.get("eta_sources") or {"joint": nan, "pixels": nan}
+def part(k):  # the largest share of σa's and σs′'s values a carried input's error alone gives
+    p = md.get(k)
+    if not p:
+        return "—"
+    return f"{max(100 * p[q][c] / md[q]['value'][c] for q in ('sigma_a_per_mm', 'sigma_s_reduced_per_mm') for c in range(3)):.1f}%"
 print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es[0]:+.1f} {es[1]:+.1f} {es[2]:+.1f}%  "
       f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f}; joint fit's "
       f"{src['joint']['value']:.3f}±{src['joint']['std']:.3f}, pixels' "
       f"{src['pixels']['value']:.3f}±{src['pixels']['std']:.3f})  "
       f"α {md['alpha']:.3f}±{al_std if al_std is not None else float('nan'):.3f} ({alpha}; "
       f"{abs(md['alpha'] - alpha) / al_std if al_std else float('nan'):.2f} std)  "
-      f"err/std {worst:.2f}  res/noise {md['residual_over_noise']:.2f}  "
+      f"err/std {worst:.2f}  light's part {part('std_from_light')}  outlines' {part('std_from_outlines')}  res/noise {md['residual_over_noise']:.2f}  "
       f"held-out {100*h.get('medium_rel_rmse', float('nan')):.2f}%/{100*h.get('cdrf_rel_rmse', float('nan')):.2f}%  "
       f"{md['profiles']} profiles {md['seconds']:.1f} s  "
       f"whole solve {f['timings']['total_s']:.2f} s ({f['timings']['total_s'] / f['timings']['decode_s']:.0f}x decoding)")

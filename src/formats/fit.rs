@@ -215,9 +215,10 @@ pub struct PerChannelJson {
     pub std: [f64; 3],
 }
 
-/// The std per channel that the held light's error gives σa and σs′ (1/mm).
+/// The std per channel that a held input's error (the light's, the outlines') gives σa and
+/// σs′ (1/mm).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LightStdJson {
+pub struct CarriedStdJson {
     #[serde(deserialize_with = "nullable::f64x3")]
     pub sigma_a_per_mm: [f64; 3],
     #[serde(deserialize_with = "nullable::f64x3")]
@@ -277,7 +278,12 @@ pub struct MediumJson {
     /// The part of σa's and σs′'s std that the held light's error alone gives (included in
     /// their `std`); absent where the light had no stated error, and in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub std_from_light: Option<LightStdJson>,
+    pub std_from_light: Option<CarriedStdJson>,
+    /// The part of σa's and σs′'s std that the detected outlines' error alone gives (included
+    /// in their `std`): each outline's stated std with the edge model's own error; absent where
+    /// it was not carried, and in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_from_outlines: Option<CarriedStdJson>,
     /// The residuals' RMS over the pixels' noise.
     #[serde(deserialize_with = "nullable::f64")]
     pub residual_over_noise: f64,

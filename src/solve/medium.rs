@@ -5,12 +5,17 @@
 use super::load::Loaded;
 use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
+use crate::camera::outline::Outline;
+use crate::detect::silhouette::EDGE_MODEL_ERROR;
 use crate::error::{Error, Result};
 use crate::fit::joint::identify::beyond_relative_range;
-use crate::fit::medium::{self, LightError, MediumFit, Radius, Setup, MODEL_ERROR};
+use crate::fit::medium::{
+    self, Held, LightError, MediumFit, OutlineError, Radius, Setup, MODEL_ERROR,
+};
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{
-    EtaSourcesJson, LightStdJson, MediumHoldoutJson, MediumJson, Method, PerChannelJson, ValueJson,
+    CarriedStdJson, EtaSourcesJson, MediumHoldoutJson, MediumJson, Method, PerChannelJson,
+    ValueJson,
 };
 use crate::model::idx;
 
@@ -74,7 +79,12 @@ pub(super) fn run(
     let t0 = std::time::Instant::now();
     let start = medium::start(&radii, &setup, m.sigma0_mm);
     let light = light_error(outcome, &fitted);
-    let mut f = medium::fit(&radii, &setup, &start, light.as_ref());
+    let outlines = outline_error(l, &fitted, &setup.light);
+    let held = Held {
+        light: light.as_ref(),
+        outlines: outlines.as_ref(),
+    };
+    let mut f = medium::fit(&radii, &setup, &start, &held);
     // The start's scan and the held-out prediction count with the fit.
     let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
@@ -145,6 +155,83 @@ fn light_error(outcome: &Outcome, fitted: &[&SphereData]) -> Option<LightError> 
         LIGHT_STEP,
         nalgebra::Matrix2::new(sa * sa, rho * sa * se, rho * sa * se, se * se),
     ))
+}
+
+/// The step (px) an outline is moved by for the medium's sensitivity to it.
+const OUTLINE_STEP: f64 = 0.01;
+
+/// The detected outlines' error for the medium fit (`light` the fit's): per fitted sphere its
+/// outline moved along its three coordinates ([`Outline::moved`]: the centre across the view
+/// along two directions, the radius), each pixel's normal and view taken again under the
+/// moved outline (turned onto the common light frame like its photo's), and the coordinates'
+/// covariance: each outline's stated std with the edge model's own error
+/// ([`EDGE_MODEL_ERROR`]), its common parts shared by every sphere. None where a sphere's
+/// detection is not found.
+pub fn outline_error<'a>(
+    l: &'a Loaded,
+    fitted: &'a [&'a SphereData],
+    light: &nalgebra::Vector3<f64>,
+) -> Option<OutlineError<'a>> {
+    struct Sphere {
+        outline: Outline,
+        unit: f64,
+        turn: Option<nalgebra::Rotation3<f64>>,
+        std_px: [f64; 3],
+    }
+    let spheres: Vec<Sphere> = fitted
+        .iter()
+        .map(|s| {
+            let i = l.report.images.iter().position(|im| im.file == s.image)?;
+            let d = l.detections.images.get(i)?.spheres.get(s.index)?;
+            let outline = d.outline.outline();
+            Some(Sphere {
+                unit: outline.pixel_unit(&l.proj),
+                outline,
+                turn: l.frames.as_ref().and_then(|f| f.get(i).copied()),
+                std_px: d.silhouette_std_px,
+            })
+        })
+        .collect::<Option<_>>()?;
+    let n = 3 * spheres.len();
+    let e = EDGE_MODEL_ERROR;
+    let covariance = nalgebra::DMatrix::from_fn(n, n, |a, b| {
+        let (coord, common) = (a % 3, [e.common_centre, e.common_centre, e.common_radius]);
+        let shared = if coord == b % 3 {
+            common[coord].powi(2)
+        } else {
+            0.0
+        };
+        if a == b {
+            spheres[a / 3].std_px[coord].powi(2) + e.independent.powi(2) + shared
+        } else {
+            shared
+        }
+    });
+    let light = *light;
+    let proj = &l.proj;
+    Some(OutlineError {
+        moved: Box::new(move |k, d| {
+            let s = &spheres[k / 3];
+            let mut shift = nalgebra::Vector3::zeros();
+            shift[k % 3] = d * s.unit;
+            let moved = s.outline.moved(&shift);
+            let px = &fitted[k / 3].px;
+            medium::pixels_moved(fitted, &light, |i, o| {
+                if i != k / 3 {
+                    return None;
+                }
+                let [x, y] = px[o];
+                let q = proj.point(nalgebra::Vector2::new(x as f64, y as f64))?;
+                let surf = moved.surface(&q)?;
+                Some(match &s.turn {
+                    Some(r) => (r * surf.normal, r * surf.view),
+                    None => (surf.normal, surf.view),
+                })
+            })
+        }),
+        step: OUTLINE_STEP,
+        covariance,
+    })
 }
 
 /// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.
@@ -296,7 +383,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
             "fitted with the medium (no --irradiance)".into()
         },
         std_source: format!(
-            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′; {}{}",
+            "{}, and the model's own error on physically based renders (σa {:.0}%, σs′ {:.0}%, times the residuals over the noise when above 1: here {:.2}; the pixels' η {}) in quadrature; η the inverse-variance mean of the joint fit's and the pixels', its error carried into σa and σs′; {}{}{}",
             if f.std_jackknife.is_some() {
                 "larger of formal and jackknife"
             } else {
@@ -318,12 +405,15 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
                 "; the held light's error (the joint fit's) carried into them by their sensitivity to its two angles"
             } else {
                 "; the light held without a stated error, so none of it is carried"
+            },
+            if f.std_outlines.is_some() {
+                "; the detected outlines' error (each one's stated std with the edge model's own) carried the same way"
+            } else {
+                ""
             }
         ),
-        std_from_light: f.std_light.as_ref().map(|s| LightStdJson {
-            sigma_a_per_mm: std::array::from_fn(|c| f.media[c].sigma_a * s[c]),
-            sigma_s_reduced_per_mm: std::array::from_fn(|c| f.media[c].sigma_s_reduced * s[3 + c]),
-        }),
+        std_from_light: f.std_light.as_ref().map(|s| carried_std(f, s)),
+        std_from_outlines: f.std_outlines.as_ref().map(|s| carried_std(f, s)),
         residual_over_noise: f.residual_over_noise,
         pixels: f.pixels,
         radii_mm: f.radii.clone(),
@@ -331,5 +421,13 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
         converged: f.converged,
         profiles: f.profiles,
         seconds: f.seconds,
+    }
+}
+
+/// σa's and σs′'s std per channel (1/mm) from a carried input's std per u (on their logarithms).
+fn carried_std(f: &MediumFit, s: &[f64]) -> CarriedStdJson {
+    CarriedStdJson {
+        sigma_a_per_mm: std::array::from_fn(|c| f.media[c].sigma_a * s[c]),
+        sigma_s_reduced_per_mm: std::array::from_fn(|c| f.media[c].sigma_s_reduced * s[3 + c]),
     }
 }

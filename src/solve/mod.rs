@@ -29,7 +29,7 @@ mod summary;
 use file::{fit_file, predictions};
 use load::{cached, load_inspected};
 pub use load::{fingerprint, load, Loaded};
-pub use medium::PROFILE;
+pub use medium::{outline_error, PROFILE};
 pub use options::{Options, SolveModel};
 use outcome::{paper_outcome, Outcome};
 pub use replot::{load_fit, replot};

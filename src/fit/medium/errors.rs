@@ -128,54 +128,59 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
 /// The others' sensitivity to η over the pixels' rows `..m` of `jac`: −(J_fᵀJ_f)⁻¹J_fᵀ j_η,
 /// J_f the other columns (a parameter the data do not move: 0); 0 at η's index.
 fn sensitivity_to_eta(jac: &DMatrix<f64>, m: usize) -> DVector<f64> {
-    let je = jac.view((0, ETA), (m, 1)).into_owned();
-    sensitivity(jac, m, &je)
+    let je = jac.column(ETA).rows(0, m).into_owned();
+    sensitivities(jac, m, 1, |_| Some(je.clone()))
+        .and_then(|s| s.into_iter().next())
+        .unwrap_or_else(|| DVector::zeros(jac.ncols()))
 }
 
 /// The first-order change of every parameter but η (held) when the pixels' residuals change by
-/// `dr` (rows `..m` of `jac`) and the fit follows: −(J_fᵀJ_f)⁻¹J_fᵀ dr, J_f the columns other
-/// than η's (a parameter the data do not move: 0); 0 at η's index.
-fn sensitivity(jac: &DMatrix<f64>, m: usize, dr: &DMatrix<f64>) -> DVector<f64> {
+/// `dr(k)` (rows `..m` of `jac`), k < `count`, and the fit follows: −(J_fᵀJ_f)⁻¹J_fᵀ dr, J_f
+/// the columns other than η's (a parameter the data do not move: 0); 0 at η's index. Each `dr`
+/// is taken and dropped in turn, so that many (three a sphere) cost one residual vector at a
+/// time. None where a `dr` is missing, of the wrong length, or the change is not finite.
+fn sensitivities(
+    jac: &DMatrix<f64>,
+    m: usize,
+    count: usize,
+    dr: impl Fn(usize) -> Option<DVector<f64>>,
+) -> Option<Vec<DVector<f64>>> {
     let n = jac.ncols();
     let others: Vec<usize> = (0..n).filter(|&k| k != ETA).collect();
     let jf = DMatrix::from_fn(m, others.len(), |i, k| jac[(i, others[k])]);
     let inv =
         inverse_of_the_determined(&(jf.transpose() * &jf))
             .map(|v| if v.is_nan() { 0.0 } else { v });
-    let s = -(inv * (jf.transpose() * dr));
-    let mut out = DVector::zeros(n);
-    for (a, &i) in others.iter().enumerate() {
-        out[i] = s[a];
-    }
-    out
+    (0..count)
+        .map(|k| {
+            let d = dr(k).filter(|d| d.len() == m)?;
+            let sk = -(&inv * (jf.transpose() * d));
+            let mut out = DVector::zeros(n);
+            for (a, &i) in others.iter().enumerate() {
+                out[i] = sk[a];
+            }
+            out.iter().all(|x| x.is_finite()).then_some(out)
+        })
+        .collect()
 }
 
-/// The held light's error carried into the others (η held, as in the second stage): `moved`
-/// are the pixels' residuals (rows `..m`, as `problem`'s) under the light moved by ± `step`
-/// rad along each of its two angles, `light_cov` those angles' covariance (rad²). Adds
-/// S Σ Sᵀ to `covariance`, S the parameters' sensitivities to the two angles, and returns S's
-/// columns.
-pub(super) fn carry_light(
+/// A held input's error carried into the others (η held, as in the second stage): `dr(k)` is
+/// the derivative of the pixels' residuals (rows `..m`, as `problem`'s) along the input's k-th
+/// coordinate (of `cov.nrows()`: the light's two angles, or three a sphere's outline), `cov`
+/// the coordinates' covariance. Adds S Σ Sᵀ to `covariance`, S the parameters' sensitivities
+/// to the coordinates ([`sensitivities`]), and returns S's columns.
+pub(super) fn carry(
     covariance: &mut DMatrix<f64>,
     problem: &Problem,
-    moved: &[[DVector<f64>; 2]; 2],
-    step: f64,
-    light_cov: &nalgebra::Matrix2<f64>,
-) -> Option<[DVector<f64>; 2]> {
+    dr: impl Fn(usize) -> Option<DVector<f64>>,
+    cov: &DMatrix<f64>,
+) -> Option<Vec<DVector<f64>>> {
     let mut jac = problem.jacobian_with(true)?;
     let m = problem.pixel_rows();
     jac.row_mut(m + 1).fill(0.0);
-    let s: [DVector<f64>; 2] = std::array::from_fn(|k| {
-        let [plus, minus] = &moved[k];
-        let dr = DMatrix::from_fn(m, 1, |i, _| (plus[i] - minus[i]) / (2.0 * step));
-        sensitivity(&jac, m, &dr)
-    });
-    if s.iter().any(|v| v.iter().any(|x| !x.is_finite())) {
-        return None;
-    }
+    let s = sensitivities(&jac, m, cov.nrows(), dr)?;
     let sm = DMatrix::from_columns(&s);
-    let sigma = DMatrix::from_fn(2, 2, |a, b| light_cov[(a, b)]);
-    *covariance += &sm * sigma * sm.transpose();
+    *covariance += &sm * cov * sm.transpose();
     Some(s)
 }
 

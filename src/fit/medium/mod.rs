@@ -36,7 +36,9 @@ use std::time::Instant;
 
 pub use derived::{Derived, PerChannel};
 pub use errors::{ModelError, MODEL_ERROR};
-pub use pixels::{described, fitted, fitted_obs, pixels, pixels_seen, Px, Radius, Setup};
+pub use pixels::{
+    described, fitted, fitted_obs, pixels, pixels_moved, pixels_seen, Px, Radius, Setup,
+};
 
 /// The medium fit's result.
 #[derive(Clone, Debug, PartialEq)]
@@ -74,6 +76,11 @@ pub struct MediumFit {
     pub light_sensitivity: Option<[DVector<f64>; 2]>,
     /// Per u, the std the light's error alone gives (already in `covariance`).
     pub std_light: Option<Vec<f64>>,
+    /// Per outline coordinate (three a sphere, [`OutlineError`]), per u, the first-order
+    /// change with it (per pixel; 0 at η), when the outlines' error was carried.
+    pub outline_sensitivity: Option<Vec<DVector<f64>>>,
+    /// Per u, the std the outlines' error alone gives (already in `covariance`).
+    pub std_outlines: Option<Vec<f64>>,
     /// Per u, the first-order change with ln(η − 1) when η is moved and the pixels refitted (0
     /// at η): what carries η's error into σa and σs′.
     pub eta_sensitivity: DVector<f64>,
@@ -117,6 +124,26 @@ impl LightError {
             covariance,
         }
     }
+}
+
+/// The detected outlines' error, for the medium's: three coordinates a sphere (its outline's
+/// centre moved across the view along two directions, and its radius grown, in pixels), with
+/// `moved(k, d)` the fit's pixels ([`pixels_moved`]: same pixels, same order) with coordinate k
+/// moved by d pixels, and the coordinates' covariance (px²). The spheres' geometry comes from
+/// their outlines, so an outline drawn off moves every normal on its sphere (docs/medium.md,
+/// "The outlines' error carried").
+pub struct OutlineError<'a> {
+    pub moved: Box<dyn Fn(usize, f64) -> Vec<Radius> + Sync + 'a>,
+    pub step: f64,
+    pub covariance: DMatrix<f64>,
+}
+
+/// The held inputs whose stated errors the medium fit carries into its own: the light's and
+/// the outlines' (each None: not carried).
+#[derive(Default)]
+pub struct Held<'a> {
+    pub light: Option<&'a LightError>,
+    pub outlines: Option<&'a OutlineError<'a>>,
 }
 
 /// The two estimates of η the fit combines, each (value, std).
@@ -231,13 +258,8 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 /// say on η is capped at the model's error; where the joint fit leaves η undetermined (jade's
 /// lobe: ± 0.07–0.4) the pixels' η prevails. η's stated error is the combination's, and it is
 /// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit"), and so
-/// is the held light's error, given `light`.
-pub fn fit(
-    radii: &[Radius],
-    setup: &Setup,
-    start: &[f64],
-    light: Option<&LightError>,
-) -> MediumFit {
+/// are the held light's and outlines' errors, where `held` gives them.
+pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> MediumFit {
     let t0 = Instant::now();
     let atlas = match setup.alpha_std {
         Some(_) => SphereAtlas::free(setup.alpha),
@@ -279,8 +301,14 @@ pub fn fit(
     let (problem, report) = solve(radii, &held_setup, second, u, true);
     let p = physical(problem.u.as_slice(), setup);
     let mut errors = errors::of(&problem, Some(eta.1));
-    let carried = light.and_then(|le| carry_light(&mut errors.covariance, &problem, le));
+    let carried = held
+        .light
+        .and_then(|le| carry_light(&mut errors.covariance, &problem, le));
     let (light_sensitivity, std_light) = carried.unzip();
+    let carried = held
+        .outlines
+        .and_then(|oe| carry_outlines(&mut errors.covariance, &problem, oe));
+    let (outline_sensitivity, std_outlines) = carried.unzip();
     let profiles = atlas.computed() + rebased.as_ref().map_or(0, SphereAtlas::computed);
     MediumFit {
         media: p.media,
@@ -311,6 +339,8 @@ pub fn fit(
         light_sensitivity,
         eta_sensitivity: errors.eta_sensitivity.clone(),
         std_light,
+        outline_sensitivity,
+        std_outlines,
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
@@ -390,30 +420,78 @@ fn carry_light(
     problem: &Problem,
     le: &LightError,
 ) -> Option<([DVector<f64>; 2], Vec<f64>)> {
+    let cov = DMatrix::from_fn(2, 2, |a, b| le.covariance[(a, b)]);
+    let s = errors::carry(
+        covariance,
+        problem,
+        |k| {
+            let [plus, minus] = &le.moved[k];
+            residual_slope(problem, plus, minus, le.step)
+        },
+        &cov,
+    )?;
+    let std = std_carried(&s, &cov);
+    let [a, e]: [DVector<f64>; 2] = s.try_into().ok()?;
+    Some(([a, e], std))
+}
+
+/// The outlines' error carried into `covariance` (the fit ended at `problem`): the
+/// sensitivities to every outline coordinate and, per u, the std the outlines alone give. None
+/// where the moved pixels are not the fit's or do not evaluate.
+fn carry_outlines(
+    covariance: &mut DMatrix<f64>,
+    problem: &Problem,
+    oe: &OutlineError,
+) -> Option<(Vec<DVector<f64>>, Vec<f64>)> {
+    let s = errors::carry(
+        covariance,
+        problem,
+        |k| {
+            let (plus, minus) = ((oe.moved)(k, oe.step), (oe.moved)(k, -oe.step));
+            residual_slope(problem, &plus, &minus, oe.step)
+        },
+        &oe.covariance,
+    )?;
+    let std = std_carried(&s, &oe.covariance);
+    Some((s, std))
+}
+
+/// The pixels' residuals' central difference at `problem`'s u between the pixels `plus` and
+/// `minus` (the fit's own, moved by ± `step`), over 2 `step`. None where they are not the
+/// fit's pixels or do not evaluate.
+fn residual_slope(
+    problem: &Problem,
+    plus: &[Radius],
+    minus: &[Radius],
+    step: f64,
+) -> Option<DVector<f64>> {
     let same = |moved: &[Radius]| {
         moved.len() == problem.radii.len()
             && moved.iter().zip(problem.radii).all(|(a, b)| {
                 a.radius_mm == b.radius_mm && (0..3).all(|c| a.pixels[c].len() == b.pixels[c].len())
             })
     };
-    let mut moved: [[DVector<f64>; 2]; 2] = Default::default();
-    for (k, pair) in le.moved.iter().enumerate() {
-        for (s, radii) in pair.iter().enumerate() {
-            if !same(radii) {
-                return None;
-            }
-            let at = Problem::new(radii, problem.setup, problem.atlas, problem.u.clone(), true);
-            moved[k][s] = at.residuals()?;
-        }
+    if !(same(plus) && same(minus)) {
+        return None;
     }
-    let s = errors::carry_light(covariance, problem, &moved, le.step, &le.covariance)?;
-    let std = (0..problem.u.len())
+    let at = |radii: &[Radius]| {
+        Problem::new(radii, problem.setup, problem.atlas, problem.u.clone(), true).residuals()
+    };
+    let (up, down) = (at(plus)?, at(minus)?);
+    let m = problem.pixel_rows();
+    Some(DVector::from_fn(m, |i, _| (up[i] - down[i]) / (2.0 * step)))
+}
+
+/// Per u, the std that sensitivities `s` (one column per coordinate) give under the
+/// coordinates' covariance `cov`.
+fn std_carried(s: &[DVector<f64>], cov: &DMatrix<f64>) -> Vec<f64> {
+    let n = s.first().map_or(0, |v| v.len());
+    (0..n)
         .map(|i| {
-            let si = nalgebra::Vector2::new(s[0][i], s[1][i]);
-            si.dot(&(le.covariance * si)).max(0.0).sqrt()
+            let si = DVector::from_fn(s.len(), |k, _| s[k][i]);
+            si.dot(&(cov * &si)).max(0.0).sqrt()
         })
-        .collect();
-    Some((s, std))
+        .collect()
 }
 
 /// The joint fit's η's std where it is combined with the pixels': its stated one, its own

@@ -104,8 +104,31 @@ pub fn pixels_seen(
     light: &Vector3<f64>,
     seen: &Vector3<f64>,
 ) -> Vec<Radius> {
+    pool(spheres, light, seen, |_, _| None)
+}
+
+/// The pixels [`pixels`] chooses under `light`, each with the normal and view `moved` gives it
+/// (by sphere and observation; `None`: its own): the same pixels in the same order on a moved
+/// sphere (the fit's sensitivity to the spheres' outlines).
+pub fn pixels_moved(
+    spheres: &[&SphereData],
+    light: &Vector3<f64>,
+    moved: impl Fn(usize, usize) -> Option<(Vector3<f64>, Vector3<f64>)>,
+) -> Vec<Radius> {
+    pool(spheres, light, light, moved)
+}
+
+/// The spheres' pixels fitted under `light`, pooled by radius (in increasing radius), their
+/// cosines taken under `seen` with the geometry `moved` gives (by sphere and observation;
+/// `None`: the observation's own).
+fn pool(
+    spheres: &[&SphereData],
+    light: &Vector3<f64>,
+    seen: &Vector3<f64>,
+    moved: impl Fn(usize, usize) -> Option<(Vector3<f64>, Vector3<f64>)>,
+) -> Vec<Radius> {
     let mut radii: Vec<Radius> = Vec::new();
-    for s in spheres {
+    for (i, s) in spheres.iter().enumerate() {
         let at = match radii
             .iter()
             .position(|r| (r.radius_mm - s.radius_mm).abs() < 1e-9)
@@ -119,11 +142,12 @@ pub fn pixels_seen(
                 radii.len() - 1
             }
         };
-        for o in &s.obs {
+        for (k, o) in s.obs.iter().enumerate() {
             let (n, v) = (o.geometry.normal, o.geometry.view);
             if !fitted(&n, &v, light) {
                 continue;
             }
+            let (n, v) = moved(i, k).unwrap_or((n, v));
             for c in 0..3 {
                 if o.weight[c] > 0.0 {
                     radii[at].pixels[c].push(Px::at(&n, &v, seen, o.radiance[c], o.weight[c]));
