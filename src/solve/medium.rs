@@ -160,39 +160,44 @@ fn light_error(outcome: &Outcome, fitted: &[&SphereData]) -> Option<LightError> 
 /// The step (px) an outline is moved by for the medium's sensitivity to it.
 const OUTLINE_STEP: f64 = 0.01;
 
-/// The detected outlines' error for the medium fit (`light` the fit's): per fitted sphere its
-/// outline moved along its three coordinates ([`Outline::moved`]: the centre across the view
-/// along two directions, the radius), each pixel's normal and view taken again under the
-/// moved outline (turned onto the common light frame like its photo's), and the coordinates'
-/// covariance: each outline's stated std with the edge model's own error
-/// ([`EDGE_MODEL_ERROR`]), its common parts shared by every sphere. None where a sphere's
-/// detection is not found.
+/// The detected outlines' error for the medium fit (`light` the fit's): per outline (spheres
+/// that stayed put between photos share one, in the order first fitted) three coordinates
+/// ([`Outline::moved`]: the centre across the view along two directions, the radius), each
+/// pixel of its spheres with its normal and view taken again under the moved outline (turned
+/// onto the common light frame like its photo's), and the coordinates' covariance: each
+/// outline's stated std with the edge model's own error ([`EDGE_MODEL_ERROR`]), its common
+/// parts shared by every outline. None where a sphere's detection is not found.
 pub fn outline_error<'a>(
     l: &'a Loaded,
     fitted: &'a [&'a SphereData],
     light: &nalgebra::Vector3<f64>,
 ) -> Option<OutlineError<'a>> {
-    struct Sphere {
+    struct Drawn {
         outline: Outline,
         unit: f64,
-        turn: Option<nalgebra::Rotation3<f64>>,
         std_px: [f64; 3],
     }
-    let spheres: Vec<Sphere> = fitted
-        .iter()
-        .map(|s| {
-            let i = l.report.images.iter().position(|im| im.file == s.image)?;
-            let d = l.detections.images.get(i)?.spheres.get(s.index)?;
-            let outline = d.outline.outline();
-            Some(Sphere {
-                unit: outline.pixel_unit(&l.proj),
-                outline,
-                turn: l.frames.as_ref().and_then(|f| f.get(i).copied()),
-                std_px: d.silhouette_std_px,
-            })
-        })
-        .collect::<Option<_>>()?;
-    let n = 3 * spheres.len();
+    let mut drawn: Vec<Drawn> = vec![];
+    // Per fitted sphere: its outline's place in `drawn`, and its photo's turn.
+    let mut owner: Vec<(usize, Option<nalgebra::Rotation3<f64>>)> = vec![];
+    for s in fitted {
+        let i = l.report.images.iter().position(|im| im.file == s.image)?;
+        let d = l.detections.images.get(i)?.spheres.get(s.index)?;
+        let outline = d.outline.outline();
+        let at = match drawn.iter().position(|o| o.outline == outline) {
+            Some(at) => at,
+            None => {
+                drawn.push(Drawn {
+                    unit: outline.pixel_unit(&l.proj),
+                    outline,
+                    std_px: d.silhouette_std_px,
+                });
+                drawn.len() - 1
+            }
+        };
+        owner.push((at, l.frames.as_ref().and_then(|f| f.get(i).copied())));
+    }
+    let n = 3 * drawn.len();
     let e = EDGE_MODEL_ERROR;
     let covariance = nalgebra::DMatrix::from_fn(n, n, |a, b| {
         let (coord, common) = (a % 3, [e.common_centre, e.common_centre, e.common_radius]);
@@ -202,7 +207,7 @@ pub fn outline_error<'a>(
             0.0
         };
         if a == b {
-            spheres[a / 3].std_px[coord].powi(2) + e.independent.powi(2) + shared
+            drawn[a / 3].std_px[coord].powi(2) + e.independent.powi(2) + shared
         } else {
             shared
         }
@@ -211,19 +216,19 @@ pub fn outline_error<'a>(
     let proj = &l.proj;
     Some(OutlineError {
         moved: Box::new(move |k, d| {
-            let s = &spheres[k / 3];
+            let o = &drawn[k / 3];
             let mut shift = nalgebra::Vector3::zeros();
-            shift[k % 3] = d * s.unit;
-            let moved = s.outline.moved(&shift);
-            let px = &fitted[k / 3].px;
-            medium::pixels_moved(fitted, &light, |i, o| {
-                if i != k / 3 {
+            shift[k % 3] = d * o.unit;
+            let moved = o.outline.moved(&shift);
+            medium::pixels_moved(fitted, &light, |i, p| {
+                let (at, turn) = &owner[i];
+                if *at != k / 3 {
                     return None;
                 }
-                let [x, y] = px[o];
+                let [x, y] = fitted[i].px[p];
                 let q = proj.point(nalgebra::Vector2::new(x as f64, y as f64))?;
                 let surf = moved.surface(&q)?;
-                Some(match &s.turn {
+                Some(match turn {
                     Some(r) => (r * surf.normal, r * surf.view),
                     None => (surf.normal, surf.view),
                 })
