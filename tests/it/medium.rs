@@ -1893,24 +1893,12 @@ fn the_renders_over_the_model_at_the_truth() {
 /// Also: the light's std is in the stated covariance.
 #[test]
 fn the_light_sensitivity_follows_refits() {
-    use workbench::fit::medium::{fit, pixels, pixels_seen, start, Held, LightError, Setup};
+    use workbench::fit::medium::{fit, pixels, pixels_seen, start, Held, LightError};
     use workbench::model::LightAngles;
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
-    let dir = common::session_copy(&src);
-    let t = truth(dir.path());
-    let loaded = load_quiet(dir.path());
+    let (_dir, t, loaded, setup, sigma0) = soap_from_its_truth();
     let spheres: Vec<_> = loaded.spheres.iter().collect();
     let angles = LightAngles::from_direction(&t.light);
     let l = angles.direction();
-    let setup = Setup {
-        light: l,
-        eta_prior: (t.media[0].eta, 0.02),
-        eta_alpha_slope: 0.0,
-        alpha: t.alpha,
-        alpha_std: None,
-        irradiance: Some(t.irradiance),
-        largest_radius: 35.0,
-    };
     let moved = |da: f64, de: f64| {
         let mut m = angles;
         m.azimuth += da;
@@ -1925,9 +1913,6 @@ fn the_light_sensitivity_follows_refits() {
         nalgebra::Matrix2::identity() * std * std,
     );
     let radii = pixels(&spheres, &l);
-    let sigma0 = t
-        .media
-        .map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt());
     let f0 = fit(
         &radii,
         &setup,
@@ -1963,14 +1948,54 @@ fn the_light_sensitivity_follows_refits() {
     assert!(worst < 0.05, "{worst}");
     // The light's part is in the stated variance: it adds std_light² to what the fit without
     // the light states.
-    for (i, sl) in std_light.iter().take(6).enumerate() {
-        let (added, var) = (f0.covariance[(i, i)] - without.covariance[(i, i)], sl * sl);
-        println!("u[{i}]: light's variance {var:.3e}, added {added:.3e}");
+    assert_carried(&f0, &without, &std_light, "light's");
+}
+
+/// A carried input's std per u (`std`, σa's and σs′'s) is what the stated covariance of `with`
+/// gained over `without` (the same fit without that input's error).
+fn assert_carried(
+    with: &workbench::fit::medium::MediumFit,
+    without: &workbench::fit::medium::MediumFit,
+    std: &[f64],
+    what: &str,
+) {
+    for (i, s) in std.iter().take(6).enumerate() {
+        let (added, var) = (with.covariance[(i, i)] - without.covariance[(i, i)], s * s);
+        println!("u[{i}]: {what} variance {var:.3e}, added {added:.3e}");
         assert!(
             (added - var).abs() <= 1e-3 * var + 1e-12,
             "u[{i}]: {added} against {var}"
         );
     }
+}
+
+/// The soap renders (`datasets/pbr-soap`) loaded, with the medium fit's setup from their truth
+/// (light, η ± 0.02, roughness held, irradiance) and the start from the truth's diffusion
+/// length: the copy, the truth, the loaded session, the setup and σ0.
+fn soap_from_its_truth() -> (
+    tempfile::TempDir,
+    Truth,
+    workbench::solve::Loaded,
+    workbench::fit::medium::Setup,
+    [f64; 3],
+) {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
+    let dir = common::session_copy(&src);
+    let t = truth(dir.path());
+    let loaded = load_quiet(dir.path());
+    let setup = workbench::fit::medium::Setup {
+        light: t.light,
+        eta_prior: (t.media[0].eta, 0.02),
+        eta_alpha_slope: 0.0,
+        alpha: t.alpha,
+        alpha_std: None,
+        irradiance: Some(t.irradiance),
+        largest_radius: 35.0,
+    };
+    let sigma0 = t
+        .media
+        .map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt());
+    (dir, t, loaded, setup, sigma0)
 }
 
 /// The medium's first-order sensitivity to the detected outlines (what carries their error
@@ -1983,22 +2008,10 @@ fn the_light_sensitivity_follows_refits() {
 /// moved pixels at no move are the fit's own).
 #[test]
 fn the_outline_sensitivity_follows_refits() {
-    use workbench::fit::medium::{fit, pixels, start, Held, Setup};
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-soap");
-    let dir = common::session_copy(&src);
-    let t = truth(dir.path());
-    let loaded = load_quiet(dir.path());
+    use workbench::fit::medium::{fit, pixels, start, Held};
+    let (_dir, t, loaded, setup, sigma0) = soap_from_its_truth();
     let spheres: Vec<_> = loaded.spheres.iter().collect();
     let l = t.light;
-    let setup = Setup {
-        light: l,
-        eta_prior: (t.media[0].eta, 0.02),
-        eta_alpha_slope: 0.0,
-        alpha: t.alpha,
-        alpha_std: None,
-        irradiance: Some(t.irradiance),
-        largest_radius: 35.0,
-    };
     let outlines =
         workbench::solve::outline_error(&loaded, &spheres, &l).expect("every sphere's outline");
     let radii = pixels(&spheres, &l);
@@ -2013,9 +2026,6 @@ fn the_outline_sensitivity_follows_refits() {
             }
         }
     }
-    let sigma0 = t
-        .media
-        .map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt());
     let held = Held {
         outlines: Some(&outlines),
         ..Held::default()
@@ -2060,14 +2070,7 @@ fn the_outline_sensitivity_follows_refits() {
     println!("worst |refit − first order| over max(|first order|, 1e-4): {worst:.3}");
     // Measured 0.036 (2026-12-06): the second order of a 0.3 px move.
     assert!(worst < 0.1, "{worst}");
-    for (i, so) in std_outlines.iter().take(6).enumerate() {
-        let (added, var) = (f0.covariance[(i, i)] - without.covariance[(i, i)], so * so);
-        println!("u[{i}]: the outlines' variance {var:.3e}, added {added:.3e}");
-        assert!(
-            (added - var).abs() <= 1e-3 * var + 1e-12,
-            "u[{i}]: {added} against {var}"
-        );
-    }
+    assert_carried(&f0, &without, &std_outlines, "the outlines'");
 }
 
 /// The medium fit given the truth's inputs (by hand, about 10 s): a session of

@@ -431,8 +431,7 @@ fn carry_light(
         &cov,
     )?;
     let std = std_carried(&s, &cov);
-    let [a, e]: [DVector<f64>; 2] = s.try_into().ok()?;
-    Some(([a, e], std))
+    Some((s.try_into().ok()?, std))
 }
 
 /// The outlines' error carried into `covariance` (the fit ended at `problem`): the
