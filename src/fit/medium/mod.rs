@@ -456,8 +456,9 @@ fn carry_outlines(
 }
 
 /// The pixels' residuals' central difference at `problem`'s u between the pixels `plus` and
-/// `minus` (the fit's own, moved by ± `step`), over 2 `step`. None where they are not the
-/// fit's pixels or do not evaluate.
+/// `minus` (the fit's own, moved by ± `step`), over 2 `step`. A radius whose pixels did not
+/// move (another sphere's outline moved) is not evaluated: its rows are 0. None where they are
+/// not the fit's pixels or do not evaluate.
 fn residual_slope(
     problem: &Problem,
     plus: &[Radius],
@@ -473,12 +474,29 @@ fn residual_slope(
     if !(same(plus) && same(minus)) {
         return None;
     }
-    let at = |radii: &[Radius]| {
-        Problem::new(radii, problem.setup, problem.atlas, problem.u.clone(), true).residuals()
+    let at = |radius: &Radius| {
+        Problem::new(
+            std::slice::from_ref(radius),
+            problem.setup,
+            problem.atlas,
+            problem.u.clone(),
+            true,
+        )
+        .residuals()
     };
-    let (up, down) = (at(plus)?, at(minus)?);
-    let m = problem.pixel_rows();
-    Some(DVector::from_fn(m, |i, _| (up[i] - down[i]) / (2.0 * step)))
+    let mut out = DVector::zeros(problem.pixel_rows());
+    for (r, fitted) in problem.radii.iter().enumerate() {
+        if plus[r] == *fitted && minus[r] == *fitted {
+            continue;
+        }
+        let (up, down) = (at(&plus[r])?, at(&minus[r])?);
+        let rows = problem.offset(r, 0);
+        let n = fitted.pixels.iter().map(Vec::len).sum::<usize>();
+        for i in 0..n {
+            out[rows + i] = (up[i] - down[i]) / (2.0 * step);
+        }
+    }
+    Some(out)
 }
 
 /// Per u, the std that sensitivities `s` (one column per coordinate) give under the
