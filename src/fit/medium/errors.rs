@@ -1,7 +1,8 @@
 //! The medium fit's stated errors: the formal σ²(JᵀJ)⁻¹, a leave-one-radius-out jackknife by one
-//! Gauss–Newton step from the fit, the held η's and the held light's errors carried in by the
-//! others' sensitivity to them, and what follows for the quantities a renderer takes (the
-//! transport mean free path, the surface's diffuse albedo), by their gradients in u.
+//! Gauss–Newton step from the fit, the held η's and the held light's and outlines' errors
+//! carried in by the others' sensitivity to them (the latter two also through the pixels' η),
+//! and what follows for the quantities a renderer takes (the transport mean free path, the
+//! surface's diffuse albedo), by their gradients in u.
 
 use super::problem::{Problem, ALPHA, ETA};
 use levenberg_marquardt::LeastSquaresProblem;
@@ -145,40 +146,108 @@ fn sensitivities(
     count: usize,
     dr: impl Fn(usize) -> Option<DVector<f64>>,
 ) -> Option<Vec<DVector<f64>>> {
-    let n = jac.ncols();
-    let others: Vec<usize> = (0..n).filter(|&k| k != ETA).collect();
-    let jf = DMatrix::from_fn(m, others.len(), |i, k| jac[(i, others[k])]);
-    let inv =
-        inverse_of_the_determined(&(jf.transpose() * &jf))
-            .map(|v| if v.is_nan() { 0.0 } else { v });
+    let follow = Follow::new(jac, m, Some(ETA));
     (0..count)
-        .map(|k| {
-            let d = dr(k).filter(|d| d.len() == m)?;
-            let sk = -(&inv * (jf.transpose() * d));
-            let mut out = DVector::zeros(n);
-            for (a, &i) in others.iter().enumerate() {
-                out[i] = sk[a];
-            }
-            out.iter().all(|x| x.is_finite()).then_some(out)
-        })
+        .map(|k| follow.change(&dr(k).filter(|d| d.len() == m)?))
         .collect()
+}
+
+/// How a fit's parameters follow a change of its pixels' residuals, to first order: the
+/// normal equations' inverse over the columns the change may move (all but `held`) and the
+/// first `rows` rows of the Jacobian (a change leaves the rows after the pixels' alone).
+struct Follow {
+    /// (J_fᵀJ_f)⁻¹J_fᵀ, a parameter the data do not move 0.
+    gain: DMatrix<f64>,
+    moved: Vec<usize>,
+    n: usize,
+    m: usize,
+}
+
+impl Follow {
+    fn new(jac: &DMatrix<f64>, rows: usize, held: Option<usize>) -> Follow {
+        let n = jac.ncols();
+        let moved: Vec<usize> = (0..n).filter(|&k| Some(k) != held).collect();
+        let jf = DMatrix::from_fn(rows, moved.len(), |i, k| jac[(i, moved[k])]);
+        let inv = inverse_of_the_determined(&(jf.transpose() * &jf)).map(|v| {
+            if v.is_nan() {
+                0.0
+            } else {
+                v
+            }
+        });
+        Follow {
+            gain: inv * jf.transpose(),
+            moved,
+            n,
+            m: rows,
+        }
+    }
+
+    /// The parameters' change for the pixels' residuals' change `d` (its rows the first of the
+    /// Jacobian's; those after are unchanged). None where `d` is longer than the rows used or
+    /// the change is not finite.
+    fn change(&self, d: &DVector<f64>) -> Option<DVector<f64>> {
+        if d.len() > self.m {
+            return None;
+        }
+        let sk = -(self.gain.columns(0, d.len()) * d);
+        let mut out = DVector::zeros(self.n);
+        for (a, &i) in self.moved.iter().enumerate() {
+            out[i] = sk[a];
+        }
+        out.iter().all(|x| x.is_finite()).then_some(out)
+    }
+}
+
+/// Where η was combined from the pixels' own (the first stage, η free under its prior) and
+/// the joint fit's: a held input that moves the pixels moves the pixels' η, and the combined η
+/// by its `share` of it (the combination's weight on the pixels' η, times (η_px − 1)/(η − 1)
+/// to go from the first stage's ln(η − 1) to the second's); the others follow η by
+/// `eta_sensitivity` (d u/d ln(η − 1), 0 at η's index). The joint fit's η, read from the
+/// highlight's wings, is taken not to move with the pixels (on jade-3 the truth's outlines and
+/// light moved it 0.03, the pixels' 0.11: docs/medium.md, "The held inputs' error in η").
+pub(super) struct EtaPath<'a> {
+    /// The first stage's Jacobian at its end.
+    pub(super) first: DMatrix<f64>,
+    pub(super) share: f64,
+    pub(super) eta_sensitivity: &'a DVector<f64>,
 }
 
 /// A held input's error carried into the others (η held, as in the second stage): `dr(k)` is
 /// the derivative of the pixels' residuals (rows `..m`, as `problem`'s) along the input's k-th
 /// coordinate (of `cov.nrows()`: the light's two angles, or three a sphere's outline), `cov`
-/// the coordinates' covariance. Adds S Σ Sᵀ to `covariance`, S the parameters' sensitivities
-/// to the coordinates ([`sensitivities`]), and returns S's columns.
+/// the coordinates' covariance. With `eta`, the combined η moves with the pixels' η (the first
+/// stage's change for the same `dr`, all its rows in its normal equations) and the others with
+/// it ([`EtaPath`]). Adds S Σ Sᵀ to `covariance`, S the parameters' sensitivities to the
+/// coordinates ([`sensitivities`]), and returns S's columns.
 pub(super) fn carry(
     covariance: &mut DMatrix<f64>,
     problem: &Problem,
     dr: impl Fn(usize) -> Option<DVector<f64>>,
     cov: &DMatrix<f64>,
+    eta: Option<&EtaPath>,
 ) -> Option<Vec<DVector<f64>>> {
     let mut jac = problem.jacobian_with(true)?;
     let m = problem.pixel_rows();
     jac.row_mut(m + 1).fill(0.0);
-    let s = sensitivities(&jac, m, cov.nrows(), dr)?;
+    let held = Follow::new(&jac, m, Some(ETA));
+    let first = eta.map(|e| {
+        let mut j = e.first.clone();
+        j.row_mut(m + 1).fill(0.0);
+        (Follow::new(&j, j.nrows(), None), e)
+    });
+    let s = (0..cov.nrows())
+        .map(|k| {
+            let d = dr(k).filter(|d| d.len() == m)?;
+            let mut sk = held.change(&d)?;
+            if let Some((follow, e)) = &first {
+                let moved = e.share * follow.change(&d)?[ETA];
+                sk += e.eta_sensitivity * moved;
+                sk[ETA] = moved;
+            }
+            Some(sk)
+        })
+        .collect::<Option<Vec<_>>>()?;
     let sm = DMatrix::from_columns(&s);
     *covariance += &sm * cov * sm.transpose();
     Some(s)

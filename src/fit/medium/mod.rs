@@ -258,7 +258,9 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 /// say on η is capped at the model's error; where the joint fit leaves η undetermined (jade's
 /// lobe: ± 0.07–0.4) the pixels' η prevails. η's stated error is the combination's, and it is
 /// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit"), and so
-/// are the held light's and outlines' errors, where `held` gives them.
+/// are the held light's and outlines' errors, where `held` gives them: directly, and through
+/// the pixels' η, which they move, and its share of the combination (docs/medium.md, "The held
+/// inputs' error in η").
 pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> MediumFit {
     let t0 = Instant::now();
     let atlas = match setup.alpha_std {
@@ -283,7 +285,8 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         setup.eta_prior.0,
         joint_eta_std(setup, problem::roughness(free.0.u.as_slice(), setup)),
     );
-    let eta = match crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]) {
+    let combined = crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]);
+    let eta = match combined {
         (v, s) if v.is_finite() && s.is_finite() => (v, s),
         _ => setup.eta_prior,
     };
@@ -301,13 +304,22 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
     let (problem, report) = solve(radii, &held_setup, second, u, true);
     let p = physical(problem.u.as_slice(), setup);
     let mut errors = errors::of(&problem, Some(eta.1));
+    let eta_sensitivity = errors.eta_sensitivity.clone();
+    let eta_path = (combined.0.is_finite() && combined.1.is_finite())
+        .then(|| free.0.jacobian_with(true))
+        .flatten()
+        .map(|first| errors::EtaPath {
+            first,
+            share: pixels_share(joint.1, eta_px_std) * eta_minus_one / (eta.0 - 1.0),
+            eta_sensitivity: &eta_sensitivity,
+        });
     let carried = held
         .light
-        .and_then(|le| carry_light(&mut errors.covariance, &problem, le));
+        .and_then(|le| carry_light(&mut errors.covariance, &problem, le, eta_path.as_ref()));
     let (light_sensitivity, std_light) = carried.unzip();
     let carried = held
         .outlines
-        .and_then(|oe| carry_outlines(&mut errors.covariance, &problem, oe));
+        .and_then(|oe| carry_outlines(&mut errors.covariance, &problem, oe, eta_path.as_ref()));
     let (outline_sensitivity, std_outlines) = carried.unzip();
     let profiles = atlas.computed() + rebased.as_ref().map_or(0, SphereAtlas::computed);
     MediumFit {
@@ -419,6 +431,7 @@ fn carry_light(
     covariance: &mut DMatrix<f64>,
     problem: &Problem,
     le: &LightError,
+    eta: Option<&errors::EtaPath>,
 ) -> Option<([DVector<f64>; 2], Vec<f64>)> {
     let cov = DMatrix::from_fn(2, 2, |a, b| le.covariance[(a, b)]);
     let s = errors::carry(
@@ -429,6 +442,7 @@ fn carry_light(
             residual_slope(problem, plus, minus, le.step)
         },
         &cov,
+        eta,
     )?;
     let std = std_carried(&s, &cov);
     Some((s.try_into().ok()?, std))
@@ -441,6 +455,7 @@ fn carry_outlines(
     covariance: &mut DMatrix<f64>,
     problem: &Problem,
     oe: &OutlineError,
+    eta: Option<&errors::EtaPath>,
 ) -> Option<(Vec<DVector<f64>>, Vec<f64>)> {
     let s = errors::carry(
         covariance,
@@ -450,6 +465,7 @@ fn carry_outlines(
             residual_slope(problem, &plus, &minus, oe.step)
         },
         &oe.covariance,
+        eta,
     )?;
     let std = std_carried(&s, &oe.covariance);
     Some((s, std))
@@ -497,6 +513,13 @@ fn residual_slope(
         }
     }
     Some(out)
+}
+
+/// The weight an inverse-variance mean of the joint fit's η (std `joint`) and the pixels' (std
+/// `pixels`) gives the pixels'.
+fn pixels_share(joint: f64, pixels: f64) -> f64 {
+    let (wj, wp) = (joint.powi(-2), pixels.powi(-2));
+    wp / (wj + wp)
 }
 
 /// Per u, the std that sensitivities `s` (one column per coordinate) give under the
