@@ -1939,17 +1939,8 @@ fn the_light_sensitivity_follows_refits() {
             "angle {k}: η {:.5} → {:.5}",
             f0.media[0].eta, f1.media[0].eta
         );
-        for (i, s) in s[k].iter().take(7).enumerate() {
-            let refit = f1.u[i] - f0.u[i];
-            let said = s * std;
-            println!("angle {k}, u[{i}]: refit {refit:+.5}, sensitivity {said:+.5}");
-            let off = (refit - said).abs() / said.abs().max(1e-3);
-            if i == 6 {
-                worst_eta = worst_eta.max(off);
-            } else {
-                worst = worst.max(off);
-            }
-        }
+        let (w, we) = against_refit(&format!("angle {k}"), &s[k], std, &f0, &f1, 1e-3);
+        (worst, worst_eta) = (worst.max(w), worst_eta.max(we));
     }
     println!(
         "worst |refit − first order| over max(|first order|, 1e-3): σa, σs′ {worst:.3}, η {worst_eta:.3}"
@@ -1961,6 +1952,31 @@ fn the_light_sensitivity_follows_refits() {
     // The light's part is in the stated variance: it adds std_light² to what the fit without
     // the light states.
     assert_carried(&f0, &without, &std_light, "light's");
+}
+
+/// A sensitivity `s` (per u) times a move `by` against the refit's change from `f0` to `f1`:
+/// the largest |refit − first order| over max(|first order|, `floor`) over σa and σs′, and η's.
+fn against_refit(
+    what: &str,
+    s: &nalgebra::DVector<f64>,
+    by: f64,
+    f0: &workbench::fit::medium::MediumFit,
+    f1: &workbench::fit::medium::MediumFit,
+    floor: f64,
+) -> (f64, f64) {
+    let (mut worst, mut worst_eta): (f64, f64) = (0.0, 0.0);
+    for (i, s) in s.iter().take(7).enumerate() {
+        let refit = f1.u[i] - f0.u[i];
+        let said = s * by;
+        println!("{what}, u[{i}]: refit {refit:+.5}, sensitivity {said:+.5}");
+        let off = (refit - said).abs() / said.abs().max(floor);
+        if i == 6 {
+            worst_eta = worst_eta.max(off);
+        } else {
+            worst = worst.max(off);
+        }
+    }
+    (worst, worst_eta)
 }
 
 /// A carried input's std per u (`std`, σa's and σs′'s) is what the stated covariance of `with`
@@ -2071,17 +2087,8 @@ fn the_outline_sensitivity_follows_refits() {
             f0.u.as_slice(),
             &Held::default(),
         );
-        for (i, s) in s[k].iter().take(7).enumerate() {
-            let refit = f1.u[i] - f0.u[i];
-            let said = s * d;
-            println!("coordinate {k}, u[{i}]: refit {refit:+.5}, sensitivity {said:+.5}");
-            let off = (refit - said).abs() / said.abs().max(1e-4);
-            if i == 6 {
-                worst_eta = worst_eta.max(off);
-            } else {
-                worst = worst.max(off);
-            }
-        }
+        let (w, we) = against_refit(&format!("coordinate {k}"), &s[k], d, &f0, &f1, 1e-4);
+        (worst, worst_eta) = (worst.max(w), worst_eta.max(we));
     }
     println!(
         "worst |refit − first order| over max(|first order|, 1e-4): σa, σs′ {worst:.3}, η {worst_eta:.3}"

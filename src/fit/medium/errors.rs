@@ -207,10 +207,27 @@ impl Follow {
 /// highlight's wings, is taken not to move with the pixels (on jade-3 the truth's outlines and
 /// light moved it 0.03, the pixels' 0.11: docs/medium.md, "The held inputs' error in η").
 pub(super) struct EtaPath<'a> {
-    /// The first stage's Jacobian at its end.
-    pub(super) first: DMatrix<f64>,
-    pub(super) share: f64,
-    pub(super) eta_sensitivity: &'a DVector<f64>,
+    /// How the first stage follows a change of the pixels' residuals (all its rows).
+    first: Follow,
+    share: f64,
+    eta_sensitivity: &'a DVector<f64>,
+}
+
+impl<'a> EtaPath<'a> {
+    /// From the first stage's problem at its end. None where its Jacobian does not evaluate.
+    pub(super) fn new(
+        first: &Problem,
+        share: f64,
+        eta_sensitivity: &'a DVector<f64>,
+    ) -> Option<EtaPath<'a>> {
+        let mut jac = first.jacobian_with(true)?;
+        jac.row_mut(first.pixel_rows() + 1).fill(0.0);
+        Some(EtaPath {
+            first: Follow::new(&jac, jac.nrows(), None),
+            share,
+            eta_sensitivity,
+        })
+    }
 }
 
 /// A held input's error carried into the others (η held, as in the second stage): `dr(k)` is
@@ -231,17 +248,12 @@ pub(super) fn carry(
     let m = problem.pixel_rows();
     jac.row_mut(m + 1).fill(0.0);
     let held = Follow::new(&jac, m, Some(ETA));
-    let first = eta.map(|e| {
-        let mut j = e.first.clone();
-        j.row_mut(m + 1).fill(0.0);
-        (Follow::new(&j, j.nrows(), None), e)
-    });
     let s = (0..cov.nrows())
         .map(|k| {
             let d = dr(k).filter(|d| d.len() == m)?;
             let mut sk = held.change(&d)?;
-            if let Some((follow, e)) = &first {
-                let moved = e.share * follow.change(&d)?[ETA];
+            if let Some(e) = eta {
+                let moved = e.share * e.first.change(&d)?[ETA];
                 sk += e.eta_sensitivity * moved;
                 sk[ETA] = moved;
             }

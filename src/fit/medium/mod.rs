@@ -306,13 +306,11 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
     let mut errors = errors::of(&problem, Some(eta.1));
     let eta_sensitivity = errors.eta_sensitivity.clone();
     let eta_path = (combined.0.is_finite() && combined.1.is_finite())
-        .then(|| free.0.jacobian_with(true))
-        .flatten()
-        .map(|first| errors::EtaPath {
-            first,
-            share: pixels_share(joint.1, eta_px_std) * eta_minus_one / (eta.0 - 1.0),
-            eta_sensitivity: &eta_sensitivity,
-        });
+        .then(|| {
+            let share = pixels_share(joint.1, eta_px_std) * eta_minus_one / (eta.0 - 1.0);
+            errors::EtaPath::new(&free.0, share, &eta_sensitivity)
+        })
+        .flatten();
     let carried = held
         .light
         .and_then(|le| carry_light(&mut errors.covariance, &problem, le, eta_path.as_ref()));
