@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# The detected outlines against the truth on the eleven physically based sessions
+# (docs/measurements/detection.md, "Each sector weighted by its rim's contrast"):
+# `workbench detect <fresh copy>` on datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade
+# (its five single-sphere photos) and datasets/pbr-seeds/*, then per sphere its outline's centre
+# (x, y) and radius against truth.json's sphere in pixels (the cone's axis and half-angle,
+# through fx), each over its stated std (`silhouette_std_px`); per session the mean errors; over
+# all spheres the RMS of the sessions' means (what a session's outlines share), the RMS of each
+# sphere's error about its session's mean, the RMS of error/std, and the mean radius error per
+# radius.
+# Usage: scripts/outline-errors.sh [path/to/workbench] [scratch dir] [session names…]
+set -uo pipefail
+cd "$(dirname "$0")/.."
+wb=$(realpath "${1:-target/release/workbench}")
+out=${2:-$(mktemp -d)}
+shift 2 2>/dev/null || shift $#
+mkdir -p "$out"
+sessions=("$@")
+[ ${#sessions[@]} -eq 0 ] && sessions=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
+for s in "${sessions[@]}"; do
+  d="$out/$s"
+  rm -rf "$d"
+  case $s in
+    pbr-soap | pbr-wax) cp -r "datasets/$s" "$d" ;;
+    pbr-jade) cp -r ../shared/data/pbr-jade "$d" ;;
+    *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
+  esac
+  rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
+  "$wb" --quiet detect "$d" >"$d.log" 2>&1 || echo "$s: detect failed (see $d.log)"
+done
+python3 - "$out" "${sessions[@]}" <<'PY'
+import json, math, sys
+from collections import defaultdict
+out, sessions = sys.argv[1], sys.argv[2:]
+rows = []  # (session, file, radius_mm, [dx, dy, dr], [std])
+for s in sessions:
+    d = f"{out}/{s}"
+    try:
+        det = json.load(open(f"{d}/detections.json"))
+    except OSError:
+        continue
+    t = json.load(open(f"{d}/truth.json"))
+    fx = json.load(open(f"{d}/intrinsics.json"))["fx"]
+    for im in det["images"]:
+        if len(im["spheres"]) != 1:  # pbr-jade's row of five: its spheres are the single photos'
+            continue
+        tr = next((i for i in t["images"] if i["file"] == im["file"]), None)
+        if tr is None:
+            continue
+        c = tr["spheres"][0]["centre_mm"] if "spheres" in tr else tr["centre_mm"]
+        sp = im["spheres"][0]
+        n = math.sqrt(sum(x * x for x in c))
+        axis, half = sp["outline"]["axis"], math.radians(sp["outline"]["half_angle_deg"])
+        err = [
+            (axis[0] / axis[2] - c[0] / c[2]) * fx,
+            (axis[1] / axis[2] - c[1] / c[2]) * fx,
+            (math.tan(half) - math.tan(math.asin(sp["radius_mm"] / n))) * fx,
+        ]
+        rows.append((s, im["file"], sp["radius_mm"], err, sp["silhouette_std_px"]))
+rms = lambda v: math.sqrt(sum(x * x for x in v) / len(v)) if v else float("nan")
+by = defaultdict(list)
+for r in rows:
+    by[r[0]].append(r)
+print("session    mean error x, y, radius (px)")
+for s, rs in by.items():
+    m = [sum(r[3][k] for r in rs) / len(rs) for k in range(3)]
+    print(f"{s:10s} {m[0]:+.3f} {m[1]:+.3f} {m[2]:+.3f}")
+for k, name in enumerate(["centre x", "centre y", "radius"]):
+    means = {s: sum(r[3][k] for r in rs) / len(rs) for s, rs in by.items()}
+    within = [r[3][k] - means[r[0]] for r in rows]
+    z = [r[3][k] / r[4][k] for r in rows]
+    print(f"{name:8s}: {len(rows)} spheres, sessions' means RMS {rms(list(means.values())):.3f} px, "
+          f"about them {rms(within):.3f} px, error/std RMS {rms(z):.2f}")
+per_radius = defaultdict(list)
+for r in rows:
+    per_radius[r[2]].append(r[3][2])
+print("radius error by sphere radius: " + ", ".join(
+    f"{rad:g} mm {sum(v) / len(v):+.3f} px" for rad, v in sorted(per_radius.items(), reverse=True)))
+PY
