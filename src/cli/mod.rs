@@ -72,6 +72,10 @@ pub(crate) struct DetectArgs {
     /// Do not write the overlay pictures (overlays/<photo>.png beside detections.json).
     #[arg(long)]
     pub(crate) no_overlays: bool,
+    /// The model the detections are for (`solve --model`): the medium's outlines weigh the rim
+    /// by its contrast too, and `solve` detects again for a model whose they are not.
+    #[arg(long, value_enum, default_value_t = ModelArg::Cdrf)]
+    pub(crate) model: ModelArg,
 }
 
 #[derive(Args)]
@@ -361,7 +365,7 @@ pub(crate) fn table_size(size: TableArg, tolerance: f64) -> workbench::render::j
     }
 }
 
-/// `solve --model`.
+/// `solve --model`, `detect --model`.
 #[derive(Clone, Copy, ValueEnum)]
 pub(crate) enum ModelArg {
     /// The CDRF alone.

@@ -19,10 +19,7 @@ pub(crate) fn solve(a: SolveArgs, quiet: bool) -> Result<Solved> {
         MethodArg::Joint => Method::Joint,
         MethodArg::Paper => Method::Paper,
     };
-    o.model = match a.model {
-        ModelArg::Cdrf => solve::SolveModel::Cdrf,
-        ModelArg::Medium => solve::SolveModel::Medium,
-    };
+    o.model = solve_model(a.model);
     o.holdout = a.holdout;
     if let Some(p) = a.prior {
         o.fit.eta_prior = p;
@@ -105,5 +102,13 @@ impl Report for Solved {
                 self.out.display()
             )
         })
+    }
+}
+
+/// The solve's model for `--model`.
+pub(crate) fn solve_model(m: ModelArg) -> workbench::solve::SolveModel {
+    match m {
+        ModelArg::Cdrf => workbench::solve::SolveModel::Cdrf,
+        ModelArg::Medium => workbench::solve::SolveModel::Medium,
     }
 }

@@ -279,7 +279,7 @@ fn drop_least_disclike(found: &mut Vec<crate::detect::silhouette::Blob>, spheres
 pub(crate) fn find_spheres(
     img: &LinearRgb,
     lum: &Plane,
-    proj: &Projection,
+    (proj, weights): (&Projection, EdgeWeights),
     (spheres, card): (&[crate::formats::session::SessionSphere], Option<[u32; 4]>),
     path: &Path,
 ) -> Result<Vec<Silhouette>> {
@@ -326,6 +326,7 @@ pub(crate) fn find_spheres(
         excess: &excess,
         noise: backdrop.noise,
         hinted: hints.is_some(),
+        weights,
         path,
     };
     found
@@ -347,6 +348,8 @@ struct Photo<'a> {
     noise: f64,
     /// The spheres are where session.json's hints say.
     hinted: bool,
+    /// How the edge model weighs the rim.
+    weights: EdgeWeights,
     path: &'a Path,
 }
 
@@ -450,8 +453,8 @@ impl Photo<'_> {
             &[(lum, Some(&img.saturated))],
             proj,
             &fit.outline,
-            BAND_INNER_PX,
-            BAND_OUTER_PX,
+            (BAND_INNER_PX, BAND_OUTER_PX),
+            self.weights,
         )
         .ok_or_else(|| fail("silhouette refinement failed"))?;
         // The refinement may not wander off: it starts within a pixel of the edges.
@@ -480,7 +483,7 @@ impl Photo<'_> {
 /// each photo, its luminance and its silhouettes.
 pub(crate) fn pool_static_spheres(
     per_image: &mut [(&LinearRgb, Plane, Vec<Silhouette>)],
-    proj: &Projection,
+    (proj, weights): (&Projection, EdgeWeights),
 ) {
     if per_image.len() < 2 {
         return;
@@ -514,9 +517,13 @@ pub(crate) fn pool_static_spheres(
             .filter(|(_, &a)| a)
             .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
             .collect();
-        let Some(joint) =
-            silhouette::refine_repeated(&images, proj, medoid, BAND_INNER_PX, BAND_OUTER_PX)
-        else {
+        let Some(joint) = silhouette::refine_repeated(
+            &images,
+            proj,
+            medoid,
+            (BAND_INNER_PX, BAND_OUTER_PX),
+            weights,
+        ) else {
             continue;
         };
         if joint.outline.distance_px(medoid, proj) > 2.0 {
@@ -546,6 +553,8 @@ pub struct Options {
     /// Write overlay PNGs (into `overlays/` beside detections.json).
     pub overlays: bool,
     pub quiet: bool,
+    /// How the outlines' edge model weighs the rim (`"noise"` unless `solve --model medium`).
+    pub edge_weights: EdgeWeights,
 }
 
 /// The lights the highlights give: each photo's combined, and the session's (one light for
@@ -628,7 +637,7 @@ impl Lights {
 fn outlines<'a>(
     report: &SessionReport,
     sess: &Session,
-    proj: &Projection,
+    (proj, weights): (&Projection, EdgeWeights),
     images: &'a [LinearRgb],
     quiet: bool,
 ) -> Result<Vec<(&'a LinearRgb, Plane, Vec<Silhouette>)>> {
@@ -645,7 +654,7 @@ fn outlines<'a>(
                 .as_ref()
                 .filter(|r| crate::formats::session::same_file(&r.image, &si.file))
                 .map(|r| r.box_px);
-            let f = find_spheres(img, &lum, proj, (&si.spheres, card), &info.path)?;
+            let f = find_spheres(img, &lum, (proj, weights), (&si.spheres, card), &info.path)?;
             pb.inc(1);
             Ok((img, lum, f))
         })
@@ -653,7 +662,7 @@ fn outlines<'a>(
     pb.finish_and_clear();
     let mut per_image: Vec<(&LinearRgb, Plane, Vec<Silhouette>)> =
         per_image.into_iter().collect::<Result<_>>()?;
-    pool_static_spheres(&mut per_image, proj);
+    pool_static_spheres(&mut per_image, (proj, weights));
     Ok(per_image)
 }
 
@@ -742,7 +751,13 @@ pub fn run_decoded(
         .out
         .clone()
         .unwrap_or_else(|| report.session_file.with_file_name("detections.json"));
-    let per_image = outlines(report, sess, &proj, &decoded.images, opts.quiet)?;
+    let per_image = outlines(
+        report,
+        sess,
+        (&proj, opts.edge_weights),
+        &decoded.images,
+        opts.quiet,
+    )?;
     // Highlights once the outlines are final.
     let per_image: Vec<(&LinearRgb, Vec<Found>)> = per_image
         .into_par_iter()
@@ -818,6 +833,7 @@ pub fn run_decoded(
         images,
         seconds: t0.elapsed().as_secs_f64(),
         inputs,
+        edge_weights: opts.edge_weights,
     };
     crate::formats::output::write_json(&out, &det)?;
     set.commit()?;

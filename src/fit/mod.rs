@@ -4,9 +4,11 @@
 
 pub mod joint;
 pub mod medium;
+pub mod noise;
 pub mod observe;
 pub mod paper;
 pub mod predict;
 pub mod reduce;
 pub mod sigma_grid;
 pub mod solver;
+pub mod wave;

@@ -24,6 +24,7 @@
 use crate::camera::outline::Projection;
 use crate::detect::samples::{self, Sample};
 use crate::error::{Error, Result};
+use crate::fit::noise::{IMPULSE_FRACTION, IMPULSE_FRACTION_HIGHLIGHT, IMPULSE_SIGMA};
 use crate::fit::solver::Obs;
 use crate::formats::detections::{Detections, SphereDetection};
 use crate::formats::photo::{Decoded, LinearRgb};
@@ -55,6 +56,10 @@ pub struct SphereData {
     pub noise: [f64; 3],
     /// The noise model per channel: σ² = a + b·L.
     pub noise_model: [[f64; 2]; 3],
+    /// The noise curve per channel, σ² = a + b·L + c·L² ([`crate::fit::noise`]).
+    pub noise_curve: [crate::fit::noise::NoiseCurve; 3],
+    /// Per observation: 1/σ of its noise by `noise_curve` at its row neighbours' level.
+    pub curve_weight: Vec<[f64; 3]>,
     /// The photo's dark floor subtracted from the radiance (`None`: not measurable).
     pub floor: Option<[f64; 3]>,
     /// The photo around the sphere, for figures.
@@ -370,14 +375,27 @@ pub(crate) fn noise_model(s: &[Sample], floor: f64) -> [[f64; 2]; 3] {
     })
 }
 
-/// A pixel this many noise σ (of its difference from its neighbours' mean) away is an impulse
-/// ([`SphereData::impulses`]): a Gaussian deviate goes that far once in 10⁹ pixels.
-pub(crate) const IMPULSE_SIGMA: f64 = 6.0;
-/// … and this fraction of the neighbours' level: shading that is not smooth at the pixel scale
-/// (a rendered session's Monte Carlo noise, a textured surface) is not taken for impulses.
-pub(crate) const IMPULSE_FRACTION: f64 = 0.2;
-/// … within the highlight, where the lobe itself changes fast from pixel to pixel.
-pub(crate) const IMPULSE_FRACTION_HIGHLIGHT: f64 = 0.5;
+/// The noise curve per channel ([`crate::fit::noise::measure`]) from each unflagged pixel
+/// against its two row neighbours' mean: x₁ − (x₀ + x₂)/2 has 1.5 times a pixel's variance and
+/// none of the shading's slope; scaled by √(4/3) it reads as the difference of two pixels that
+/// `measure` takes. `floor` is the smallest σ allowed.
+pub(crate) fn noise_curve(s: &[Sample], floor: f64) -> [crate::fit::noise::NoiseCurve; 3] {
+    let skip = samples::SATURATED | samples::EDGE | samples::HIGHLIGHT;
+    let mut pairs: [Vec<(f64, f64)>; 3] = Default::default();
+    let scale = (4.0f64 / 3.0).sqrt();
+    for w in s.windows(3) {
+        let (a, b, d) = (&w[0], &w[1], &w[2]);
+        let in_row = b.px[1] == a.px[1] && d.px[1] == a.px[1];
+        let adjacent = b.px[0] == a.px[0] + 1 && d.px[0] == a.px[0] + 2;
+        if in_row && adjacent && (a.flags | b.flags | d.flags) & skip == 0 {
+            for (c, p) in pairs.iter_mut().enumerate() {
+                let (x0, x1, x2) = (a.radiance[c], b.radiance[c], d.radiance[c]);
+                p.push(((x0 + x1 + x2) / 3.0, scale * (x1 - 0.5 * (x0 + x2)).abs()));
+            }
+        }
+    }
+    pairs.map(|p| crate::fit::noise::measure(p, floor))
+}
 
 /// Collect the observations of every sphere of `det` from the session's photos (`decoded`, or
 /// decoded here when `None`), with θ and the highlight flag from each photo's light in `lights`
@@ -525,6 +543,7 @@ impl PhotoSamples<'_> {
         let brightest = intensity.iter().cloned().fold(0.0, f64::max);
         let floor = 0.5 / ((1u32 << img.bits.min(16)) as f64) / exposure / brightest;
         let model = noise_model(&smp, floor);
+        let curve = noise_curve(&smp, floor);
         let sigma = |c: usize, level: f64| (model[c][0] + model[c][1] * level.max(0.0)).sqrt();
         // Full scale (pixel value 1) in the samples' units.
         let full_scale = [0, 1, 2].map(|c| (1.0 / exposure - floor_rgb[c]) / intensity[c]);
@@ -546,6 +565,8 @@ impl PhotoSamples<'_> {
             impulses: 0,
             noise,
             noise_model: model,
+            noise_curve: curve,
+            curve_weight: vec![],
             floor: self.floor,
             crop: s
                 .outline
@@ -631,6 +652,8 @@ impl PhotoSamples<'_> {
                 radiance: x.radiance,
                 weight: [0, 1, 2].map(|c| 1.0 / sigma(c, level[c])),
             });
+            out.curve_weight
+                .push([0, 1, 2].map(|c| 1.0 / out.noise_curve[c].sigma(level[c])));
             out.px.push(x.px);
         }
     }

@@ -141,6 +141,22 @@ pub struct Detections {
     /// `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
     #[serde(default)]
     pub inputs: crate::formats::fingerprint::Inputs,
+    /// How the outlines' edge model weighed the rim ([`EdgeWeights`]; absent: `"noise"`).
+    #[serde(default)]
+    pub edge_weights: EdgeWeights,
+}
+
+/// How the outlines' edge model (`detect::silhouette`) weighs the rim's angular sectors: by their
+/// residual's noise alone (`"noise"`, what `workbench detect` and the CDRF's solve use), or also
+/// by their rim's contrast (`"contrast"`, what `solve --model medium` uses: a dim stretch of a
+/// translucent sphere's rim draws the outline inward; docs/measurements/detection.md, "Each
+/// sector weighted by its rim's contrast").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeWeights {
+    #[default]
+    Noise,
+    Contrast,
 }
 
 /// How a highlight was located.

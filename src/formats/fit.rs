@@ -287,6 +287,10 @@ pub struct MediumJson {
     /// The residuals' RMS over the pixels' noise.
     #[serde(deserialize_with = "nullable::f64")]
     pub residual_over_noise: f64,
+    /// The residuals averaged over 5° bands of θ per radius and channel, against their noise:
+    /// about 1 where the model describes the photos (docs/medium.md, "The renders' noise").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wave_over_noise: Option<f64>,
     /// Pixel-channels fitted, and the radii they came from.
     pub pixels: usize,
     #[serde(deserialize_with = "nullable::vec")]

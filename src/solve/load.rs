@@ -7,7 +7,7 @@ use crate::detect;
 use crate::error::{Error, Result};
 use crate::fit::joint::Measured;
 use crate::fit::observe::{self, SphereData};
-use crate::formats::detections::{self, Detections};
+use crate::formats::detections::{self, Detections, EdgeWeights};
 use crate::formats::fingerprint::{self, Inputs};
 use crate::formats::fit::{FitFile, Timings, SCHEMA};
 use crate::formats::photo::Decoded;
@@ -45,7 +45,7 @@ pub struct Loaded {
 fn reusable(
     path: &Path,
     report: &SessionReport,
-    now: &Inputs,
+    (now, edge_weights): (&Inputs, EdgeWeights),
 ) -> std::result::Result<Detections, String> {
     if !path.is_file() {
         return Err("no detections.json yet".into());
@@ -73,6 +73,12 @@ fn reusable(
     }
     if let Some(why) = fingerprint::differs(&d.inputs, now) {
         return Err(format!("detections.json is stale: {why}"));
+    }
+    if d.edge_weights != edge_weights {
+        return Err(format!(
+            "detections.json's outlines weighed the rim by {:?}, this model's by {:?}",
+            d.edge_weights, edge_weights
+        ));
     }
     Ok(d)
 }
@@ -106,7 +112,7 @@ pub(super) fn load_inspected(
         (&report, &sess),
         &now,
         (&detections_path, reuse),
-        opts.quiet,
+        (opts.quiet, opts.model.edge_weights()),
         &mut skipped,
     )?;
     timings.detect_s = t1.elapsed().as_secs_f64();
@@ -277,7 +283,7 @@ fn detections_location(
         if opts.redetect {
             Err("--redetect".to_string())
         } else {
-            reusable(p, report, now)
+            reusable(p, report, (now, opts.model.edge_weights()))
         }
     };
     let in_session = report.session_file.with_file_name("detections.json");
@@ -305,7 +311,7 @@ fn detections(
     (report, sess): (&SessionReport, &Session),
     now: &Inputs,
     (detections_path, reuse): (&Path, std::result::Result<Detections, String>),
-    quiet: bool,
+    (quiet, edge_weights): (bool, EdgeWeights),
     skipped: &mut Vec<String>,
 ) -> Result<(Detections, Option<Decoded>)> {
     Ok(match reuse {
@@ -323,6 +329,7 @@ fn detections(
                     out: Some(detections_path.to_path_buf()),
                     overlays: true,
                     quiet,
+                    edge_weights,
                 },
                 (report, sess),
                 &decoded,

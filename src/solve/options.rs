@@ -2,6 +2,7 @@
 //! figures) and the fit's settings ([`Settings`], the one settings type of a fit).
 
 use crate::fit::joint::Settings;
+use crate::formats::detections::EdgeWeights;
 use crate::formats::fit::Method;
 use std::path::PathBuf;
 
@@ -58,4 +59,17 @@ pub enum SolveModel {
     Cdrf,
     /// The CDRF, then the medium from its light, η and lobe.
     Medium,
+}
+
+impl SolveModel {
+    /// How detection weighs the outlines' rim for this model: by the sectors' noise for the CDRF
+    /// (whose own synthetic sessions' light coverage rests on it), by their contrast too for the
+    /// medium (the physically based renders' outlines come out nearer their truth;
+    /// docs/measurements/detection.md, "Each sector weighted by its rim's contrast").
+    pub fn edge_weights(self) -> EdgeWeights {
+        match self {
+            SolveModel::Cdrf => EdgeWeights::Noise,
+            SolveModel::Medium => EdgeWeights::Contrast,
+        }
+    }
 }

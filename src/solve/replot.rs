@@ -29,6 +29,10 @@ pub fn load_fit(fit_path: &Path, quiet: bool) -> Result<(FitFile, super::Loaded)
     // Detections are looked for beside the session, then beside the fit (as `solve --out` left
     // them); nothing is written into a session folder that is not the fit's.
     opts.out = Some(fit_path.to_path_buf());
+    // A medium fit's outlines are the medium's (`SolveModel::edge_weights`).
+    if fit.medium.is_some() {
+        opts.model = super::SolveModel::Medium;
+    }
     let l = super::load(&opts)?;
     let same = l.spheres.len() == fit.rmse.spheres.len()
         && l.spheres

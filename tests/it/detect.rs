@@ -14,6 +14,7 @@ fn run(dir: &Path) -> workbench::Result<Detections> {
         out: None,
         overlays: true,
         quiet: true,
+        edge_weights: Default::default(),
     })
 }
 

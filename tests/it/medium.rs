@@ -1066,9 +1066,12 @@ fn the_bundled_jade_is_measured_with_its_roughness() {
 /// the shift of η the joint fit's own η–α correlation gives for that difference (0.105) joins
 /// the joint η's error before it is combined with the pixels' 1.696 ± 0.104. Measured
 /// (2026-12-06, 15 mm held out): η 1.570 ± 0.144 (without the widening 1.494, red's σa +71%);
-/// σa +38, +3, +12%; σs′ +22, −10, −2%; every σa, σs′ and η error within 0.34 of its std.
-/// Asserted: η within 0.09 of the truth, each error within 1.5 of its stated std. (Red's σa is
-/// not asserted within the issue's 10%: jade-6's detected outlines are off, docs/medium.md.)
+/// σa +38, +3, +12%; σs′ +22, −10, −2%; every σa, σs′ and η error within 0.34 of its std. With
+/// the pixels' noise measured as a curve and the outlines weighing the rim by its contrast
+/// (2026-12-07): η 1.539 ± 0.135 (the pixels' 1.655 ± 0.114), σa +12, +20, +13%, σs′ −9, −4,
+/// −9%, every error within 0.71 of its std.
+/// Asserted: η within 0.09 of the truth, each error within 1.5 of its stated std. (σa is not
+/// asserted within the issue's 10%: jade-6's detected outlines are still off, docs/medium.md.)
 #[test]
 fn the_joint_fits_eta_gives_way_where_its_roughness_was_wrong() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-6");
@@ -1105,8 +1108,9 @@ fn the_joint_fits_eta_gives_way_where_its_roughness_was_wrong() {
     }
     println!("worst error {worst:.2} std");
     assert!(worst < 1.5, "{worst}");
-    // Its stated errors are 79–95% of σa and σs′ (the misfit scales the model's own): said.
-    assert_eq!(poorly_determined_is_said(&f), 2);
+    // Its stated errors are 21–23% of σa and σs′ (79–95% while the noise was measured short
+    // and the misfit scaled the model's own): no note calls them poorly determined.
+    assert_eq!(poorly_determined_is_said(&f), 0);
 }
 
 /// `workbench plot` of a medium fit draws the medium's own figures (its pixels and model
@@ -1132,29 +1136,40 @@ fn the_medium_fit_is_drawn(fit: &Path) {
     }
 }
 
-/// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), which the diffusion
-/// model does not describe: the output must say so, and its errors must be widened toward the
-/// truth. All five radii fitted, the residuals are 1.90 times the noise, so the misfit note is
-/// there (its threshold 1.5). With the model's error scaled by the misfit the worst of σa and
+/// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), all five radii fitted:
+/// its errors must cover the truth. Until 2026-12-06 its residuals were 1.90 times the noise (a
+/// noise the line σ² = a + b·L measured short) and the misfit note spoke. With the model's error scaled by the misfit the worst of σa and
 /// σs′ was 2.11 of its stated std (2.61 with Snell's beams and the deepest shadow fitted;
 /// unscaled 4.67); with the held light's error carried into them (2026-12-06), 1.40 (σs′_r,
 /// 33% low, the light alone ± 23%); with the boundary's roughness measured (2026-12-06), 1.41
 /// (σs′_r, 26% low; σa within 9.7%); with the joint η's error widened by its α's difference from
 /// the medium's, 1.39; with the held light's and outlines' errors reaching η through the
 /// pixels' η (2026-12-06), 1.23, and η 1.504 ± 0.090 is 1.28 of its std off (1.80 before: held,
-/// η took none of their error). Both asserted within 1.5, the coverage docs/uncertainty.md
-/// asks of the medium's errors.
+/// η took none of their error). With the pixels' noise measured as a curve in the level
+/// (`fit::noise`) that alone left σs′_r 27.5% low at 1.97 of its std, unsaid: the outlines, drawn
+/// 0.22 px small, were the error. With them weighing the rim by its contrast as well
+/// (2026-12-07; docs/medium.md, "The noise curve with the outlines weighted by their
+/// contrast"): residuals 1.02 of the noise (the issue's goal is 1.5), σs′_r 15.6% low at 0.85
+/// of its std, η 1.530 ± 0.084 at 1.07. Asserted: the residuals within 1.5 of the noise and no
+/// misfit said; σa, σs′ and η within 1.5 of their stated std, the coverage docs/uncertainty.md
+/// asks of the medium's errors; detections.json's outlines the medium's.
 #[test]
-fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
+fn a_jade_like_medium_meets_its_noise_and_its_errors_cover() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-3");
     let (dir, t, f) = medium_solve(&src, &[]);
     let m = f.medium.as_ref().expect("fit.json's medium");
+    assert!(m.residual_over_noise < 1.5, "{}", m.residual_over_noise);
     assert!(
-        f.notes
-            .iter()
-            .any(|n| n.starts_with("medium: residuals") && n.contains("the noise")),
+        !f.notes.iter().any(|n| n.starts_with("medium: residuals")),
         "{:?}",
         f.notes
+    );
+    let det: workbench::formats::detections::Detections =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detections.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        det.edge_weights,
+        workbench::formats::detections::EdgeWeights::Contrast
     );
     let mut worst = 0.0f64;
     for c in 0..3 {
@@ -1174,7 +1189,7 @@ fn a_medium_the_model_misses_is_said_and_its_errors_cover() {
     );
     assert!(worst < 1.5, "{worst}");
     assert!(eta_off < 1.5, "η {eta_off}");
-    // Its stated errors are 23–25% of σa and σs′: no note calls them poorly determined.
+    // Its stated errors are 15–22% of σa and σs′: no note calls them poorly determined.
     assert_eq!(poorly_determined_is_said(&f), 0);
     mitsuba_reads_and_renders_the_export(&dir.path().join("fit.json"), m);
 }
@@ -1334,7 +1349,9 @@ fn the_loop_closes(fit: &Path, m: &workbench::formats::fit::MediumJson) {
     assert!((0.85..1.2).contains(&o.render_over_medium), "{o:?}");
     assert!(o.cdrf_rel_rmse > o.render_rel_rmse, "{o:?}");
     assert_eq!(j.radii.len(), 5);
-    assert!(j.radii.iter().all(|r| r.bands.len() > 20));
+    // 5° bands up to 105°, each with its fewest pixels: at 600 pixels a sphere the bands nearest
+    // the light hold 10–13 and 20–22 of them count (measured 2026-12-07).
+    assert!(j.radii.iter().all(|r| r.bands.len() >= 20));
     let png = image::open(out.join("close-loop.png")).unwrap();
     assert_eq!((png.width(), png.height()), (1500, 60 + 340 * 3));
 }

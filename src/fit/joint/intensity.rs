@@ -149,6 +149,10 @@ fn scale_sphere(s: &mut SphereData, k: &[f64; 3]) {
         o.radiance = std::array::from_fn(|c| o.radiance[c] / k[c]);
         o.weight = std::array::from_fn(|c| o.weight[c] * k[c]);
     }
+    for w in s.curve_weight.iter_mut() {
+        *w = std::array::from_fn(|c| w[c] * k[c]);
+    }
+    s.noise_curve = std::array::from_fn(|c| s.noise_curve[c].scaled(k[c]));
     s.noise = std::array::from_fn(|c| s.noise[c] / k[c]);
     // σ² = a + b·L: with L and σ over k, a over k² and b over k.
     s.noise_model = std::array::from_fn(|c| {
@@ -192,6 +196,8 @@ mod tests {
             impulses: 0,
             noise: [0.5; 3],
             noise_model: [[0.25, 0.0]; 3],
+            noise_curve: [crate::fit::noise::NoiseCurve::constant(0.5); 3],
+            curve_weight: vec![[2.0; 3]; values.len()],
             floor: None,
             crop: crate::fit::observe::Crop {
                 x0: 0,

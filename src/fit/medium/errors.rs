@@ -15,19 +15,20 @@ use nalgebra::{DMatrix, DVector};
 /// docs/medium.md, "The medium fit"): σa −4 to +19%, σs′ −12 to +16%, and the pixels' η 0.04 to
 /// 0.10 low (rms 0.067). The statistical errors alone were 0.2–3%. Set so that each of these
 /// lies within 1.5 of its stated error; the jade-like renders, not used to set them, test them.
-/// Since the deepest shadow left the fit and the beams follow the transmitted light's mean
-/// direction, the same sessions' errors are σa −2.6 to +5.6% and σs′ −6.2 to +2.5%: the terms
-/// are about three times what they need, and are kept until the pixels' noise is measured
-/// right (docs/medium.md, "The renders' noise"), which moves every weight and the jade-like
-/// fits' misfit that scales them.
+/// Since the deepest shadow left the fit, the beams follow the transmitted light's mean
+/// direction, the pixels' noise is measured as a curve in the level ([`crate::fit::noise`]) and
+/// the outlines weigh the rim by its contrast (`formats::detections::EdgeWeights`), the same
+/// sessions' errors are σa −4.4 to +3.5% and σs′ +1.1 to +8.1% (docs/medium.md, "The noise
+/// curve with the outlines weighted by their contrast"): the terms are about twice what they
+/// need, and are kept while the jade-like fits lean on them.
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
-/// terms on σa and σs′ are scaled by the residuals' RMS over the noise when above 1 (as a scale
-/// factor widens measurements that disagree beyond their errors;
-/// [`crate::stats::inverse_variance_mean`]). The eight wax and soap fits are at 0.91–1.21 of
-/// the noise, the jade-like ones at 1.9–8.1. η's term is not scaled: it weighs the pixels' η
-/// against the joint fit's, and on the jade-like renders, where the joint fit's η is the worse
-/// (0.1–0.3 off), scaling it moved η and σa further from the truth (docs/medium.md).
+/// terms on σa and σs′ are scaled by [`misfit`] (as a scale factor widens measurements that
+/// disagree beyond their errors; [`crate::stats::inverse_variance_mean`]): the residuals' RMS
+/// over the noise (the eight wax and soap fits 1.00–1.08, the jade-like ones 0.99–1.18) or their
+/// wave over [`WAVE_CALIBRATED`]. η's term is not scaled: it weighs the pixels' η against the
+/// joint fit's, and on the jade-like renders, where the joint fit's η is the worse (0.1–0.3
+/// off), scaling it moved η and σa further from the truth (docs/medium.md).
 ///
 /// On the boundary's roughness α, where the fit measures it, the term is relative (on ln α),
 /// set the same way from the same eight sessions' whole solves (docs/medium.md, "α's model
@@ -41,6 +42,25 @@ pub const MODEL_ERROR: ModelError = ModelError {
     eta: 0.07,
     alpha: 0.20,
 };
+
+/// The largest wave over its noise ([`crate::fit::wave`]) among the eight wax and soap fits that
+/// set [`MODEL_ERROR`], with 15 mm held out or all radii fitted (2.2–5.2, their pixels'
+/// residuals 1.00–1.08 of the noise; the jade-like fits 3.4–11.7; docs/medium.md, "The noise
+/// curve with the outlines weighted by their contrast"). A fit whose wave is k times this
+/// carries k times the model's term. The wave grows as √(pixels a band) for the same miss, so on photos
+/// of more pixels a sphere than these (about 1500–15000 a sphere) the factor is conservative.
+pub const WAVE_CALIBRATED: f64 = 5.2;
+
+/// The factor the model's term is scaled by: the residuals' RMS over the noise, or the wave
+/// over [`WAVE_CALIBRATED`], where either is above 1.
+pub fn misfit(residual_over_noise: f64, wave_over_noise: f64) -> f64 {
+    let w = if wave_over_noise.is_finite() {
+        wave_over_noise / WAVE_CALIBRATED
+    } else {
+        0.0
+    };
+    residual_over_noise.max(w).max(1.0)
+}
 
 /// The model's own error per quantity ([`MODEL_ERROR`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,6 +77,8 @@ pub(super) struct Errors {
     pub(super) std_formal: Vec<f64>,
     pub(super) std_jackknife: Option<Vec<f64>>,
     pub(super) residual_over_noise: f64,
+    /// The pixels' residuals over 5° bands of θ against their noise ([`crate::fit::wave`]).
+    pub(super) wave: crate::fit::wave::Wave,
     /// d u/d ln(η − 1) of the other parameters with η moved and the pixels refitted (first
     /// order): zero at η's own index.
     pub(super) eta_sensitivity: DVector<f64>,
@@ -75,6 +97,7 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
                 std_formal: vec![f64::NAN; n],
                 std_jackknife: None,
                 residual_over_noise: f64::NAN,
+                wave: crate::fit::wave::wave(std::iter::empty()),
                 eta_sensitivity: DVector::zeros(n),
             }
         }
@@ -86,6 +109,7 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
     jac.row_mut(m + 1).fill(0.0);
     let pixels_ss: f64 = r.rows(0, m).iter().map(|v| v * v).sum();
     let residual_over_noise = (pixels_ss / m as f64).sqrt();
+    let wave = residual_wave(problem, &r);
     let s2 = (pixels_ss / (m as f64 - n as f64).max(1.0)).max(1.0);
     let formal = inverse_of_the_determined(&(jac.transpose() * &jac)) * s2;
     let std_formal: Vec<f64> = (0..n).map(|k| sqrt(formal[(k, k)])).collect();
@@ -104,7 +128,7 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
         formal[(a, b)] / (std_formal[a] * std_formal[b]) * stated[a] * stated[b]
     });
     let eta_minus_one = problem.u[ETA].exp();
-    let misfit = residual_over_noise.max(1.0);
+    let misfit = misfit(residual_over_noise, wave.over_noise);
     for c in 0..3 {
         covariance[(c, c)] += (misfit * MODEL_ERROR.sigma_a).powi(2);
         covariance[(3 + c, 3 + c)] += (misfit * MODEL_ERROR.sigma_s_reduced).powi(2);
@@ -122,8 +146,23 @@ pub(super) fn of(problem: &Problem, eta_held: Option<f64>) -> Errors {
         std_formal,
         std_jackknife,
         residual_over_noise,
+        wave,
         eta_sensitivity,
     }
+}
+
+/// The wave of the pixels' residuals `r` (their rows first), one group per radius and channel.
+fn residual_wave(problem: &Problem, r: &DVector<f64>) -> crate::fit::wave::Wave {
+    let rows = problem.radii.iter().enumerate().flat_map(|(i, radius)| {
+        (0..3).flat_map(move |c| {
+            let at = problem.offset(i, c);
+            radius.pixels[c]
+                .iter()
+                .enumerate()
+                .map(move |(k, px)| (3 * i + c, px.cos_theta.clamp(-1.0, 1.0).acos(), r[at + k]))
+        })
+    });
+    crate::fit::wave::wave(rows)
 }
 
 /// The others' sensitivity to η over the pixels' rows `..m` of `jac`: −(J_fᵀJ_f)⁻¹J_fᵀ j_η,

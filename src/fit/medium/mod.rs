@@ -35,7 +35,7 @@ use problem::{physical, predicted, profiles, Problem, ALPHA, ETA};
 use std::time::Instant;
 
 pub use derived::{Derived, PerChannel};
-pub use errors::{ModelError, MODEL_ERROR};
+pub use errors::{misfit, ModelError, MODEL_ERROR, WAVE_CALIBRATED};
 pub use pixels::{
     described, fitted, fitted_obs, pixels, pixels_moved, pixels_seen, Px, Radius, Setup,
 };
@@ -61,6 +61,8 @@ pub struct MediumFit {
     pub std_jackknife: Option<Vec<f64>>,
     /// The residuals' RMS in units of the noise (η's prior row left out).
     pub residual_over_noise: f64,
+    /// The residuals' wave over its noise ([`crate::fit::wave`]).
+    pub wave_over_noise: f64,
     pub pixels: usize,
     pub radii: Vec<f64>,
     /// Profiles computed (the nodes of the fit's atlas), and the solver's evaluations.
@@ -334,6 +336,7 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         std_formal: errors.std_formal,
         std_jackknife: errors.std_jackknife,
         residual_over_noise: errors.residual_over_noise,
+        wave_over_noise: errors.wave.over_noise,
         pixels: problem.pixel_rows(),
         radii: radii.iter().map(|r| r.radius_mm).collect(),
         profiles,

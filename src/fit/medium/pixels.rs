@@ -142,7 +142,7 @@ fn pool(
                 radii.len() - 1
             }
         };
-        for (k, o) in s.obs.iter().enumerate() {
+        for (k, (o, w)) in s.obs.iter().zip(&s.curve_weight).enumerate() {
             let (n, v) = (o.geometry.normal, o.geometry.view);
             if !fitted(&n, &v, light) {
                 continue;
@@ -150,7 +150,7 @@ fn pool(
             let (n, v) = moved(i, k).unwrap_or((n, v));
             for c in 0..3 {
                 if o.weight[c] > 0.0 {
-                    radii[at].pixels[c].push(Px::at(&n, &v, seen, o.radiance[c], o.weight[c]));
+                    radii[at].pixels[c].push(Px::at(&n, &v, seen, o.radiance[c], w[c]));
                 }
             }
         }
