@@ -159,6 +159,15 @@ pub enum EdgeWeights {
     Contrast,
 }
 
+impl std::fmt::Display for EdgeWeights {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(match self {
+            EdgeWeights::Noise => "noise",
+            EdgeWeights::Contrast => "contrast",
+        })
+    }
+}
+
 /// How a highlight was located.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -76,7 +76,7 @@ fn reusable(
     }
     if d.edge_weights != edge_weights {
         return Err(format!(
-            "detections.json's outlines weighed the rim by {:?}, this model's by {:?}",
+            "detections.json's outlines weighed the rim by {}, this model's by {}",
             d.edge_weights, edge_weights
         ));
     }

@@ -291,7 +291,7 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     }
     if f.residual_over_noise > MISFIT || f.wave_over_noise > MISFIT * WAVE_CALIBRATED {
         notes.push(format!(
-            "medium: residuals {:.1}× the noise, their means over 5° bands of θ {:.1}× theirs (at most {WAVE_CALIBRATED} on the renders the model describes): the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (their stated errors are widened by it; docs/medium.md names what the model leaves out)",
+            "medium: residuals {:.1}× the noise, their means over 5° bands of θ {:.1}× theirs (at most {WAVE_CALIBRATED} on the wax and soap renders): the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (their stated errors are widened by it; docs/medium.md names what the model leaves out)",
             f.residual_over_noise, f.wave_over_noise
         ));
     }

@@ -148,9 +148,9 @@ fn pool(
                 continue;
             }
             let (n, v) = moved(i, k).unwrap_or((n, v));
-            for c in 0..3 {
+            for (c, pixels) in radii[at].pixels.iter_mut().enumerate() {
                 if o.weight[c] > 0.0 {
-                    radii[at].pixels[c].push(Px::at(&n, &v, seen, o.radiance[c], w[c]));
+                    pixels.push(Px::at(&n, &v, seen, o.radiance[c], w[c]));
                 }
             }
         }
