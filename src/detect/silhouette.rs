@@ -19,7 +19,8 @@
 //!    fitted Gaussian blur (5-point Gauss–Hermite). The per-sector terms are linear and solved in
 //!    closed form (variable projection); Levenberg–Marquardt ([`crate::lm`]) moves the three
 //!    outline parameters and the blur. Sectors that the model does not explain (a terminator
-//!    crossing the band) are down-weighted by their own residual.
+//!    crossing the band) are down-weighted by their own residual; for the medium's outlines
+//!    ([`EdgeWeights::Contrast`]) dim stretches of rim by their contrast as well.
 
 use crate::camera::outline::{Outline, Projection};
 use crate::formats::detections::EdgeWeights;
