@@ -15,26 +15,13 @@ wb=$(realpath "${1:-target/release/workbench}")
 out=${2:-$(mktemp -d)}
 shift 2 2>/dev/null || shift $#
 mkdir -p "$out"
+source scripts/lib/pbr-sessions.sh
 sessions=("$@")
-[ ${#sessions[@]} -eq 0 ] && sessions=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
+[ ${#sessions[@]} -eq 0 ] && sessions=("${PBR_SESSIONS[@]}")
 for s in "${sessions[@]}"; do
   d="$out/$s"
-  rm -rf "$d" "$d.fit.json"
-  case $s in
-    pbr-soap | pbr-wax) cp -r "datasets/$s" "$d" ;;
-    pbr-jade)
-      cp -r ../shared/data/pbr-jade "$d"
-      python3 - "$d/session.json" <<'PY'
-import json, sys
-p = sys.argv[1]
-s = json.load(open(p))
-s["images"] = [i for i in s["images"] if i["file"] != "row.png"]
-json.dump(s, open(p, "w"), indent=1)
-PY
-      ;;
-    *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
-  esac
-  rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
+  rm -f "$d.fit.json"
+  copy_session "$s" "$d"
   e=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['irradiance_in_png_units'])" "$d/truth.json")
   "$wb" --quiet solve "$d" --model medium --irradiance "$e" --holdout 15 --out "$d.fit.json" >"$d.log" 2>&1
   python3 - "$d.fit.json" "$d/truth.json" "$s" <<'PY'

@@ -8,25 +8,28 @@
 # all spheres the RMS of the sessions' means (what a session's outlines share), the RMS of each
 # sphere's error about its session's mean, the RMS of error/std, and the mean radius error per
 # radius.
-# Usage: scripts/outline-errors.sh [path/to/workbench] [scratch dir] [session names…]
+# `--model medium` detects as `solve --model medium` does (the rim weighed by its contrast too);
+# the default, as `workbench detect` and the CDRF's solve do.
+# Usage: scripts/outline-errors.sh [--model cdrf|medium] [path/to/workbench] [scratch dir]
+#        [session names…]
 set -uo pipefail
 cd "$(dirname "$0")/.."
+model=cdrf
+if [ "${1:-}" = --model ]; then
+  model=$2
+  shift 2
+fi
 wb=$(realpath "${1:-target/release/workbench}")
 out=${2:-$(mktemp -d)}
 shift 2 2>/dev/null || shift $#
 mkdir -p "$out"
+source scripts/lib/pbr-sessions.sh
 sessions=("$@")
-[ ${#sessions[@]} -eq 0 ] && sessions=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
+[ ${#sessions[@]} -eq 0 ] && sessions=("${PBR_SESSIONS[@]}")
 for s in "${sessions[@]}"; do
   d="$out/$s"
-  rm -rf "$d"
-  case $s in
-    pbr-soap | pbr-wax) cp -r "datasets/$s" "$d" ;;
-    pbr-jade) cp -r ../shared/data/pbr-jade "$d" ;;
-    *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
-  esac
-  rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
-  "$wb" --quiet detect "$d" >"$d.log" 2>&1 || echo "$s: detect failed (see $d.log)"
+  copy_session "$s" "$d"
+  "$wb" --quiet detect "$d" --model "$model" >"$d.log" 2>&1 || echo "$s: detect failed (see $d.log)"
 done
 python3 - "$out" "${sessions[@]}" <<'PY'
 import json, math, sys
@@ -42,8 +45,6 @@ for s in sessions:
     t = json.load(open(f"{d}/truth.json"))
     fx = json.load(open(f"{d}/intrinsics.json"))["fx"]
     for im in det["images"]:
-        if len(im["spheres"]) != 1:  # pbr-jade's row of five: its spheres are the single photos'
-            continue
         tr = next((i for i in t["images"] if i["file"] == im["file"]), None)
         if tr is None:
             continue

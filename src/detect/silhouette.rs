@@ -312,7 +312,7 @@ pub(crate) fn ransac(
 /// parts, shared by every sphere of a session (the same material, camera and light). With the
 /// rim weighed by its contrast ([`EdgeWeights::Contrast`], the medium's outlines) the same
 /// sessions' means are off by 0.035 and 0.023 px in the centre and 0.046 px in the radius
-/// (`scripts/outline-errors.sh`): within these terms but the centre's first coordinate, 17%
+/// (`scripts/outline-errors.sh --model medium`): within these terms but the centre's first coordinate, 17%
 /// above its 0.03.
 pub const EDGE_MODEL_ERROR: EdgeModelError = EdgeModelError {
     independent: 0.05,

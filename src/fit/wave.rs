@@ -72,20 +72,16 @@ pub fn wave(rows: impl IntoIterator<Item = (usize, f64, f64)>) -> Wave {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
 
-    /// Residuals of a standard normal (Box–Muller from a xorshift) over θ 0–120°, four groups.
+    /// Residuals of a standard normal over θ 0–120°, four groups.
     fn rows(offset: impl Fn(f64) -> f64) -> Vec<(usize, f64, f64)> {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut uniform = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         (0..200_000)
             .map(|k| {
                 let theta = (120.0 * (k as f64 + 0.5) / 200_000.0f64).to_radians();
-                let g = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
+                let g: f64 = StandardNormal.sample(&mut rng);
                 (k % 4, theta, g + offset(theta))
             })
             .collect()

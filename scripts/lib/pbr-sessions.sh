@@ -1,0 +1,26 @@
+# The eleven physically based sessions of docs/medium.md, for scripts that measure on them
+# (scripts/medium-sessions.sh, scripts/outline-errors.sh): source it from the repository root.
+# PBR_SESSIONS: their names. copy_session <name> <dir>: a fresh copy of one into <dir>
+# (datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade with its five single-sphere
+# photos, datasets/pbr-seeds/*), without what a run leaves (detections.json, fit.json, overlays).
+PBR_SESSIONS=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
+
+copy_session() {
+  local s=$1 d=$2
+  rm -rf "$d"
+  case $s in
+    pbr-soap | pbr-wax) cp -r "datasets/$s" "$d" ;;
+    pbr-jade)
+      cp -r ../shared/data/pbr-jade "$d"
+      python3 - "$d/session.json" <<'PY'
+import json, sys
+p = sys.argv[1]
+s = json.load(open(p))
+s["images"] = [i for i in s["images"] if i["file"] != "row.png"]
+json.dump(s, open(p, "w"), indent=1)
+PY
+      ;;
+    *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
+  esac
+  rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
+}
