@@ -24,7 +24,7 @@ fn detect(dir: &Path) -> Detections {
         out: None,
         overlays: false,
         quiet: true,
-        edge_weights: Default::default(),
+        medium_outlines: false,
     })
     .unwrap()
 }

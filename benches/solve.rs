@@ -32,7 +32,7 @@ fn detect(dir: &Path) -> f64 {
         out: None,
         overlays: false,
         quiet: true,
-        edge_weights: Default::default(),
+        medium_outlines: false,
     })
     .unwrap();
     t0.elapsed().as_secs_f64()

@@ -8,8 +8,9 @@
 # all spheres the RMS of the sessions' means (what a session's outlines share), the RMS of each
 # sphere's error about its session's mean, the RMS of error/std, and the mean radius error per
 # radius.
-# `--model medium` detects as `solve --model medium` does (the rim weighed by its contrast too);
-# the default, as `workbench detect` and the CDRF's solve do.
+# `--model medium` detects as `solve --model medium` does and measures the outlines drawn for the
+# medium (`medium_outline`: the rim weighed by its contrast too); without it, the outlines every
+# model's detection draws (`outline`), which the highlights, the light and the CDRF use.
 # Usage: scripts/outline-errors.sh [--model cdrf|medium] [path/to/workbench] [scratch dir]
 #        [session names…]
 set -uo pipefail
@@ -31,10 +32,10 @@ for s in "${sessions[@]}"; do
   copy_session "$s" "$d"
   "$wb" --quiet detect "$d" --model "$model" >"$d.log" 2>&1 || echo "$s: detect failed (see $d.log)"
 done
-python3 - "$out" "${sessions[@]}" <<'PY'
+python3 - "$model" "$out" "${sessions[@]}" <<'PY'
 import json, math, sys
 from collections import defaultdict
-out, sessions = sys.argv[1], sys.argv[2:]
+model, out, sessions = sys.argv[1], sys.argv[2], sys.argv[3:]
 rows = []  # (session, file, radius_mm, [dx, dy, dr], [std])
 for s in sessions:
     d = f"{out}/{s}"
@@ -50,14 +51,18 @@ for s in sessions:
             continue
         c = tr["spheres"][0]["centre_mm"] if "spheres" in tr else tr["centre_mm"]
         sp = im["spheres"][0]
+        # The medium's outline where it was drawn (`--model medium`), else the one the CDRF uses.
+        drawn = sp.get("medium_outline") if model == "medium" else None
+        outline = drawn["outline"] if drawn else sp["outline"]
+        std = drawn["std_px"] if drawn else sp["silhouette_std_px"]
         n = math.sqrt(sum(x * x for x in c))
-        axis, half = sp["outline"]["axis"], math.radians(sp["outline"]["half_angle_deg"])
+        axis, half = outline["axis"], math.radians(outline["half_angle_deg"])
         err = [
             (axis[0] / axis[2] - c[0] / c[2]) * fx,
             (axis[1] / axis[2] - c[1] / c[2]) * fx,
             (math.tan(half) - math.tan(math.asin(sp["radius_mm"] / n))) * fx,
         ]
-        rows.append((s, im["file"], sp["radius_mm"], err, sp["silhouette_std_px"]))
+        rows.append((s, im["file"], sp["radius_mm"], err, std))
 rms = lambda v: math.sqrt(sum(x * x for x in v) / len(v)) if v else float("nan")
 by = defaultdict(list)
 for r in rows:

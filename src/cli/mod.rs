@@ -72,8 +72,9 @@ pub(crate) struct DetectArgs {
     /// Do not write the overlay pictures (overlays/<photo>.png beside detections.json).
     #[arg(long)]
     pub(crate) no_overlays: bool,
-    /// The model the detections are for (`solve --model`): the medium's outlines weigh the rim
-    /// by its contrast too, and `solve` detects again for a model whose they are not.
+    /// The model the detections are for (`solve --model`): `medium` also draws each outline for
+    /// the medium (the rim weighed by its contrast too), which `solve --model medium` needs;
+    /// the outlines every model uses are the same either way.
     #[arg(long, value_enum, default_value_t = ModelArg::Cdrf)]
     pub(crate) model: ModelArg,
 }

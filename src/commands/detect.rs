@@ -14,7 +14,7 @@ pub(crate) fn detect(a: DetectArgs, quiet: bool) -> Result<Detected> {
         out: a.out.clone(),
         overlays: !a.no_overlays,
         quiet,
-        edge_weights: super::solve::solve_model(a.model).edge_weights(),
+        medium_outlines: super::solve::solve_model(a.model).medium_outlines(),
     };
     let d = detect::run(&opts)?;
     let out = a

@@ -20,6 +20,16 @@ pub struct Silhouette {
     pub noise: f64,
     pub edge_points: usize,
     pub inlier_px: Vec<Vector2<f64>>,
+    /// The outline drawn for the medium fit (the rim weighed by its contrast too,
+    /// [`crate::detect::silhouette::EdgeWeights::Contrast`]), where it was asked for.
+    pub medium: Option<MediumOutline>,
+}
+
+/// An outline drawn for the medium fit, and its 1-σ errors (centre x, y and radius, px).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MediumOutline {
+    pub outline: Outline,
+    pub std_px: [f64; 3],
 }
 
 /// Everything found on one sphere, before serialisation.

@@ -22,11 +22,11 @@ use crate::formats::photo::{Decoded, LinearRgb};
 use crate::formats::session::{self, LightMode, Session, SessionReport};
 use crate::model::LightAngles;
 use found::locate_highlights;
-pub use found::{Found, Silhouette};
+pub use found::{Found, MediumOutline, Silhouette};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
-use silhouette::{blobs, Plane};
+use silhouette::{blobs, EdgeWeights, Plane};
 use std::path::{Path, PathBuf};
 
 /// The band of pixels the edge model fits: this far inside and outside the silhouette (px).
@@ -279,7 +279,7 @@ fn drop_least_disclike(found: &mut Vec<crate::detect::silhouette::Blob>, spheres
 pub(crate) fn find_spheres(
     img: &LinearRgb,
     lum: &Plane,
-    (proj, weights): (&Projection, EdgeWeights),
+    (proj, medium): (&Projection, bool),
     (spheres, card): (&[crate::formats::session::SessionSphere], Option<[u32; 4]>),
     path: &Path,
 ) -> Result<Vec<Silhouette>> {
@@ -326,7 +326,7 @@ pub(crate) fn find_spheres(
         excess: &excess,
         noise: backdrop.noise,
         hinted: hints.is_some(),
-        weights,
+        medium,
         path,
     };
     found
@@ -348,8 +348,8 @@ struct Photo<'a> {
     noise: f64,
     /// The spheres are where session.json's hints say.
     hinted: bool,
-    /// How the edge model weighs the rim.
-    weights: EdgeWeights,
+    /// Draw each outline for the medium fit too ([`MediumOutline`]).
+    medium: bool,
     path: &'a Path,
 }
 
@@ -449,21 +449,42 @@ impl Photo<'_> {
         if fit.inliers.len() < 20 {
             return Err(fail("too few silhouette edge points"));
         }
-        let refined = silhouette::refine_repeated(
-            &[(lum, Some(&img.saturated))],
-            proj,
-            &fit.outline,
-            (BAND_INNER_PX, BAND_OUTER_PX),
-            self.weights,
-        )
-        .ok_or_else(|| fail("silhouette refinement failed"))?;
-        // The refinement may not wander off: it starts within a pixel of the edges.
-        let shift = fit.outline.distance_px(&refined.outline, proj);
-        let outline = if shift < (0.05 * fit.outline.radius_px(proj)).max(3.0) {
-            refined.outline
-        } else {
-            fit.outline
+        let refine = |start: &Outline, weights| {
+            silhouette::refine_repeated(
+                &[(lum, Some(&img.saturated))],
+                proj,
+                start,
+                (BAND_INNER_PX, BAND_OUTER_PX),
+                weights,
+            )
         };
+        // The refinement may not wander off: it starts within a pixel of the edges.
+        let kept = |refined: &silhouette::Refined| {
+            let shift = fit.outline.distance_px(&refined.outline, proj);
+            if shift < (0.05 * fit.outline.radius_px(proj)).max(3.0) {
+                refined.outline
+            } else {
+                fit.outline
+            }
+        };
+        let refined = refine(&fit.outline, EdgeWeights::Noise)
+            .ok_or_else(|| fail("silhouette refinement failed"))?;
+        let outline = kept(&refined);
+        // The medium's outline from the same start, its rim weighed by its contrast too (from
+        // the noise-weighted outline instead, jade-3's radius error grows from −0.15 to
+        // −0.20 px: the sector weights are the start's).
+        let medium = self
+            .medium
+            .then(|| match refine(&fit.outline, EdgeWeights::Contrast) {
+                Some(r) => MediumOutline {
+                    outline: kept(&r),
+                    std_px: r.std_px,
+                },
+                None => MediumOutline {
+                    outline,
+                    std_px: refined.std_px,
+                },
+            });
         Ok(Silhouette {
             radius_mm,
             outline,
@@ -473,6 +494,7 @@ impl Photo<'_> {
             noise: noise.max(1e-6),
             edge_points: edges.len(),
             inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
+            medium,
         })
     }
 }
@@ -480,10 +502,11 @@ impl Photo<'_> {
 /// Spheres that stayed put across the photos (same radii in every photo, outlines within 2 px):
 /// refit each outline over all photos at once. Each photo lights a different part of the rim, so
 /// the edge model's light-dependent errors average out (photometric-stereo sets). `per_image`:
-/// each photo, its luminance and its silhouettes.
+/// each photo, its luminance and its silhouettes. The outlines drawn for the medium, where they
+/// were, are pooled the same way from their own.
 pub(crate) fn pool_static_spheres(
     per_image: &mut [(&LinearRgb, Plane, Vec<Silhouette>)],
-    (proj, weights): (&Projection, EdgeWeights),
+    proj: &Projection,
 ) {
     if per_image.len() < 2 {
         return;
@@ -495,49 +518,68 @@ pub(crate) fn pool_static_spheres(
     }
     for j in 0..first.len() {
         let outlines: Vec<Outline> = per_image.iter().map(|(_, _, fs)| fs[j].outline).collect();
-        let Some(medoid) = outlines.iter().min_by(|a, b| {
-            let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
-            let db: f64 = outlines.iter().map(|o| b.distance_px(o, proj)).sum();
-            da.total_cmp(&db)
-        }) else {
-            continue;
-        };
-        // Static when at least three quarters of the outlines agree within 2 px; the rest are
-        // failed fits of the same sphere and get the common outline too.
-        let agree: Vec<bool> = outlines
-            .iter()
-            .map(|o| o.distance_px(medoid, proj) <= 2.0)
-            .collect();
-        if 4 * agree.iter().filter(|&&a| a).count() < 3 * outlines.len() {
-            continue;
+        if let Some((joint, n)) = pooled(per_image, &outlines, proj, EdgeWeights::Noise) {
+            for (_, _, fs) in per_image.iter_mut() {
+                let f = &mut fs[j];
+                f.outline = joint.outline;
+                f.std_px = joint.std_px;
+                f.blur_px = joint.blur_px;
+                f.photos = n;
+            }
         }
-        let images: Vec<(&Plane, Option<&[bool]>)> = per_image
+        let medium: Option<Vec<Outline>> = per_image
             .iter()
-            .zip(&agree)
-            .filter(|(_, &a)| a)
-            .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
+            .map(|(_, _, fs)| fs[j].medium.map(|m| m.outline))
             .collect();
-        let Some(joint) = silhouette::refine_repeated(
-            &images,
-            proj,
-            medoid,
-            (BAND_INNER_PX, BAND_OUTER_PX),
-            weights,
-        ) else {
-            continue;
-        };
-        if joint.outline.distance_px(medoid, proj) > 2.0 {
-            continue;
-        }
-        let n = images.len();
-        for (_, _, fs) in per_image.iter_mut() {
-            let f = &mut fs[j];
-            f.outline = joint.outline;
-            f.std_px = joint.std_px;
-            f.blur_px = joint.blur_px;
-            f.photos = n;
+        if let Some((joint, _)) =
+            medium.and_then(|o| pooled(per_image, &o, proj, EdgeWeights::Contrast))
+        {
+            for (_, _, fs) in per_image.iter_mut() {
+                fs[j].medium = Some(MediumOutline {
+                    outline: joint.outline,
+                    std_px: joint.std_px,
+                });
+            }
         }
     }
+}
+
+/// One sphere's `outlines` (one a photo) refitted over all photos at once, with how many photos
+/// it took: when at least three quarters of them agree within 2 px of their medoid (the rest are
+/// failed fits of the same sphere, and get the common outline too) and the refit stays within
+/// 2 px of it. None otherwise.
+fn pooled(
+    per_image: &[(&LinearRgb, Plane, Vec<Silhouette>)],
+    outlines: &[Outline],
+    proj: &Projection,
+    weights: EdgeWeights,
+) -> Option<(silhouette::Refined, usize)> {
+    let medoid = outlines.iter().min_by(|a, b| {
+        let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
+        let db: f64 = outlines.iter().map(|o| b.distance_px(o, proj)).sum();
+        da.total_cmp(&db)
+    })?;
+    let agree: Vec<bool> = outlines
+        .iter()
+        .map(|o| o.distance_px(medoid, proj) <= 2.0)
+        .collect();
+    if 4 * agree.iter().filter(|&&a| a).count() < 3 * outlines.len() {
+        return None;
+    }
+    let images: Vec<(&Plane, Option<&[bool]>)> = per_image
+        .iter()
+        .zip(&agree)
+        .filter(|(_, &a)| a)
+        .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
+        .collect();
+    let joint = silhouette::refine_repeated(
+        &images,
+        proj,
+        medoid,
+        (BAND_INNER_PX, BAND_OUTER_PX),
+        weights,
+    )?;
+    (joint.outline.distance_px(medoid, proj) <= 2.0).then_some((joint, images.len()))
 }
 
 fn arr3(v: &Vector3<f64>) -> [f64; 3] {
@@ -553,8 +595,9 @@ pub struct Options {
     /// Write overlay PNGs (into `overlays/` beside detections.json).
     pub overlays: bool,
     pub quiet: bool,
-    /// How the outlines' edge model weighs the rim (`"noise"` unless `solve --model medium`).
-    pub edge_weights: EdgeWeights,
+    /// Draw each outline for the medium fit too (`SphereDetection::medium_outline`; `detect
+    /// --model medium`, `solve --model medium`).
+    pub medium_outlines: bool,
 }
 
 /// The lights the highlights give: each photo's combined, and the session's (one light for
@@ -637,7 +680,7 @@ impl Lights {
 fn outlines<'a>(
     report: &SessionReport,
     sess: &Session,
-    (proj, weights): (&Projection, EdgeWeights),
+    (proj, medium): (&Projection, bool),
     images: &'a [LinearRgb],
     quiet: bool,
 ) -> Result<Vec<(&'a LinearRgb, Plane, Vec<Silhouette>)>> {
@@ -654,7 +697,7 @@ fn outlines<'a>(
                 .as_ref()
                 .filter(|r| crate::formats::session::same_file(&r.image, &si.file))
                 .map(|r| r.box_px);
-            let f = find_spheres(img, &lum, (proj, weights), (&si.spheres, card), &info.path)?;
+            let f = find_spheres(img, &lum, (proj, medium), (&si.spheres, card), &info.path)?;
             pb.inc(1);
             Ok((img, lum, f))
         })
@@ -662,7 +705,7 @@ fn outlines<'a>(
     pb.finish_and_clear();
     let mut per_image: Vec<(&LinearRgb, Plane, Vec<Silhouette>)> =
         per_image.into_iter().collect::<Result<_>>()?;
-    pool_static_spheres(&mut per_image, (proj, weights));
+    pool_static_spheres(&mut per_image, proj);
     Ok(per_image)
 }
 
@@ -721,6 +764,10 @@ fn sphere_detection(
         }),
         no_highlight: f.highlight.as_ref().err().cloned(),
         samples: samples::counts(&smp),
+        medium_outline: f.silhouette.medium.map(|m| MediumOutlineJson {
+            outline: OutlineJson::from(&m.outline),
+            std_px: m.std_px,
+        }),
     }
 }
 
@@ -754,7 +801,7 @@ pub fn run_decoded(
     let per_image = outlines(
         report,
         sess,
-        (&proj, opts.edge_weights),
+        (&proj, opts.medium_outlines),
         &decoded.images,
         opts.quiet,
     )?;
@@ -833,7 +880,6 @@ pub fn run_decoded(
         images,
         seconds: t0.elapsed().as_secs_f64(),
         inputs,
-        edge_weights: opts.edge_weights,
     };
     crate::formats::output::write_json(&out, &det)?;
     set.commit()?;

@@ -23,12 +23,23 @@
 //!    ([`EdgeWeights::Contrast`]) dim stretches of rim by their contrast as well.
 
 use crate::camera::outline::{Outline, Projection};
-use crate::formats::detections::EdgeWeights;
 use crate::formats::photo::Raster;
 use nalgebra::{Matrix3, Vector2, Vector3};
 
 /// A single-channel floating-point image (luminance).
 pub type Plane = Raster<f32>;
+
+/// How the edge model weighs the rim's angular sectors: by their residual's noise alone
+/// (`Noise`: the outlines the highlights, the light and the CDRF use), or also by their rim's
+/// contrast (`Contrast`: the outlines drawn for the medium fit, since a dim stretch of a
+/// translucent sphere's rim draws the outline inward; docs/measurements/detection.md, "Each
+/// sector weighted by its rim's contrast").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum EdgeWeights {
+    #[default]
+    Noise,
+    Contrast,
+}
 
 impl Raster<f32> {
     /// Bilinear interpolation at a pixel position (pixel centres at integers); clamped at the

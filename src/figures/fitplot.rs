@@ -616,7 +616,10 @@ fn holdout(fit: &FitFile, g: &Group) -> Figure {
 
 /// Every figure of a fit (not yet written): radiance and residuals against θ and φ, the
 /// correlation, the holdout, a residual image per sphere.
-pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
+pub fn figures(
+    fit: &FitFile,
+    (spheres, medium): (&[SphereData], Option<&[SphereData]>),
+) -> Vec<Named> {
     let groups = groups(fit, spheres);
     let fitted = match fit.method {
         crate::formats::fit::Method::Joint => "joint fit",
@@ -665,7 +668,9 @@ pub fn figures(fit: &FitFile, spheres: &[SphereData]) -> Vec<Named> {
         });
     }
     if let Some(m) = &fit.medium {
-        let medium = medium_groups(fit, m, &groups);
+        // The medium's pixels are seated on its own outlines, where given.
+        let seated = medium.map(|spheres| self::groups(fit, spheres));
+        let medium = medium_groups(fit, m, seated.as_deref().unwrap_or(&groups));
         out.push(Named {
             name: "medium-radiance-theta".into(),
             caption: "The medium fit (solve --model medium): its pixels (off the highlight and the rim, θ up to 105°) against θ per channel, per radius, its model's prediction as solid curves.".into(),
@@ -870,7 +875,7 @@ fn residual_images(g: &Group) -> Vec<Named> {
 pub(crate) fn write_all(
     fit: &FitFile,
     fit_path: &Path,
-    spheres: &[SphereData],
+    spheres: (&[SphereData], Option<&[SphereData]>),
     dir: &Path,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;

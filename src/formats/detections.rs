@@ -96,6 +96,21 @@ pub struct SphereDetection {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub no_highlight: Option<String>,
     pub samples: Counts,
+    /// The outline drawn for the medium fit (`detect --model medium`, `solve --model medium`):
+    /// each sector of the rim weighed by its contrast as well as its noise, since a translucent
+    /// sphere's dim stretches of rim draw the outline inward (docs/measurements/detection.md,
+    /// "Each sector weighted by its rim's contrast"). The medium's pixels are seated on it;
+    /// `outline` above, which the highlights, the light and the CDRF use, is the same whichever
+    /// model asked. Absent where the medium was not asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub medium_outline: Option<MediumOutlineJson>,
+}
+
+/// The outline drawn for the medium fit, with its 1-σ errors (centre x, y and radius, px).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MediumOutlineJson {
+    pub outline: OutlineJson,
+    pub std_px: [f64; 3],
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -141,30 +156,16 @@ pub struct Detections {
     /// `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
     #[serde(default)]
     pub inputs: crate::formats::fingerprint::Inputs,
-    /// How the outlines' edge model weighed the rim ([`EdgeWeights`]; absent: `"noise"`).
-    #[serde(default)]
-    pub edge_weights: EdgeWeights,
 }
 
-/// How the outlines' edge model (`detect::silhouette`) weighs the rim's angular sectors: by their
-/// residual's noise alone (`"noise"`, what `workbench detect` and the CDRF's solve use), or also
-/// by their rim's contrast (`"contrast"`, what `solve --model medium` uses: a dim stretch of a
-/// translucent sphere's rim draws the outline inward; docs/measurements/detection.md, "Each
-/// sector weighted by its rim's contrast").
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum EdgeWeights {
-    #[default]
-    Noise,
-    Contrast,
-}
-
-impl std::fmt::Display for EdgeWeights {
-    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        f.write_str(match self {
-            EdgeWeights::Noise => "noise",
-            EdgeWeights::Contrast => "contrast",
-        })
+impl Detections {
+    /// Whether every sphere has the outline drawn for the medium fit
+    /// ([`SphereDetection::medium_outline`]).
+    pub fn has_medium_outlines(&self) -> bool {
+        self.images
+            .iter()
+            .flat_map(|i| &i.spheres)
+            .all(|s| s.medium_outline.is_some())
     }
 }
 

@@ -7,7 +7,7 @@ use crate::detect;
 use crate::error::{Error, Result};
 use crate::fit::joint::Measured;
 use crate::fit::observe::{self, SphereData};
-use crate::formats::detections::{self, Detections, EdgeWeights};
+use crate::formats::detections::{self, Detections};
 use crate::formats::fingerprint::{self, Inputs};
 use crate::formats::fit::{FitFile, Timings, SCHEMA};
 use crate::formats::photo::Decoded;
@@ -41,11 +41,11 @@ pub struct Loaded {
 }
 
 /// Whether `detections.json` can be reused: made from inputs of the same content (`now`), same
-/// schema, same photos.
+/// schema, same photos, and with the outlines drawn for the medium where `medium` asks for them.
 fn reusable(
     path: &Path,
     report: &SessionReport,
-    (now, edge_weights): (&Inputs, EdgeWeights),
+    (now, medium): (&Inputs, bool),
 ) -> std::result::Result<Detections, String> {
     if !path.is_file() {
         return Err("no detections.json yet".into());
@@ -74,11 +74,11 @@ fn reusable(
     if let Some(why) = fingerprint::differs(&d.inputs, now) {
         return Err(format!("detections.json is stale: {why}"));
     }
-    if d.edge_weights != edge_weights {
-        return Err(format!(
-            "detections.json's outlines weighed the rim by {}, this model's by {}",
-            d.edge_weights, edge_weights
-        ));
+    if medium && !d.has_medium_outlines() {
+        return Err(
+            "detections.json has no outlines drawn for the medium, which --model medium needs"
+                .into(),
+        );
     }
     Ok(d)
 }
@@ -112,7 +112,7 @@ pub(super) fn load_inspected(
         (&report, &sess),
         &now,
         (&detections_path, reuse),
-        (opts.quiet, opts.model.edge_weights()),
+        (opts.quiet, opts.model.medium_outlines()),
         &mut skipped,
     )?;
     timings.detect_s = t1.elapsed().as_secs_f64();
@@ -283,7 +283,7 @@ fn detections_location(
         if opts.redetect {
             Err("--redetect".to_string())
         } else {
-            reusable(p, report, (now, opts.model.edge_weights()))
+            reusable(p, report, (now, opts.model.medium_outlines()))
         }
     };
     let in_session = report.session_file.with_file_name("detections.json");
@@ -311,7 +311,7 @@ fn detections(
     (report, sess): (&SessionReport, &Session),
     now: &Inputs,
     (detections_path, reuse): (&Path, std::result::Result<Detections, String>),
-    (quiet, edge_weights): (bool, EdgeWeights),
+    (quiet, medium_outlines): (bool, bool),
     skipped: &mut Vec<String>,
 ) -> Result<(Detections, Option<Decoded>)> {
     Ok(match reuse {
@@ -329,7 +329,7 @@ fn detections(
                     out: Some(detections_path.to_path_buf()),
                     overlays: true,
                     quiet,
-                    edge_weights,
+                    medium_outlines,
                 },
                 (report, sess),
                 &decoded,

@@ -41,10 +41,45 @@ pub(super) fn check(opts: &Options) -> Result<()> {
     Ok(())
 }
 
-/// The medium fit after the joint fit `outcome`, on the spheres `is_held` does not hold out.
+/// The spheres seated on the outlines drawn for the medium (detections.json's `medium_outline`,
+/// [`crate::formats::detections::MediumOutlineJson`]): each observation's normal and view taken
+/// again under its sphere's medium outline (turned onto the common light frame like its
+/// photo's), as [`outline_error`] moves them; its radiance, weights and noise the same. An
+/// observation the medium's outline leaves outside keeps its own (a rim pixel, beyond what the
+/// medium fits). None where a sphere's detection or its medium outline is missing.
+pub fn medium_spheres(l: &Loaded, spheres: &[SphereData]) -> Option<Vec<SphereData>> {
+    spheres
+        .iter()
+        .map(|s| {
+            let i = l.report.images.iter().position(|im| im.file == s.image)?;
+            let d = l.detections.images.get(i)?.spheres.get(s.index)?;
+            let outline = d.medium_outline?.outline.outline();
+            let turn = l.frames.as_ref().and_then(|f| f.get(i).copied());
+            let mut seated = s.clone();
+            for (o, [x, y]) in seated.obs.iter_mut().zip(&s.px) {
+                let Some(surf) = l
+                    .proj
+                    .point(nalgebra::Vector2::new(*x as f64, *y as f64))
+                    .and_then(|q| outline.surface(&q))
+                else {
+                    continue;
+                };
+                (o.geometry.normal, o.geometry.view) = match turn {
+                    Some(r) => (r * surf.normal, r * surf.view),
+                    None => (surf.normal, surf.view),
+                };
+            }
+            Some(seated)
+        })
+        .collect()
+}
+
+/// The medium fit after the joint fit `outcome`, on the `spheres` (seated on the medium's
+/// outlines: [`medium_spheres`]) that `is_held` does not hold out.
 pub(super) fn run(
     opts: &Options,
     (l, given_by): (&Loaded, &str),
+    spheres: &[SphereData],
     outcome: &Outcome,
     is_held: impl Fn(&SphereData) -> bool,
     notes: &mut Vec<String>,
@@ -52,7 +87,7 @@ pub(super) fn run(
     let p = &outcome.params;
     let m = &p.material;
     let eta_std = outcome.std[idx::ETA];
-    let fitted: Vec<&SphereData> = l.spheres.iter().filter(|s| !is_held(s)).collect();
+    let fitted: Vec<&SphereData> = spheres.iter().filter(|s| !is_held(s)).collect();
     let setup = Setup {
         light: p.light.direction(),
         eta_prior: (
@@ -88,7 +123,7 @@ pub(super) fn run(
     };
     let mut f = medium::fit(&radii, &setup, &start, &held);
     // The start's scan and the held-out prediction count with the fit.
-    let held: Vec<&SphereData> = l.spheres.iter().filter(|s| is_held(s)).collect();
+    let held: Vec<&SphereData> = spheres.iter().filter(|s| is_held(s)).collect();
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
     say(&f, notes);
@@ -184,7 +219,13 @@ pub fn outline_error<'a>(
     let mut owner: Vec<(usize, Option<nalgebra::Rotation3<f64>>)> = vec![];
     for s in fitted {
         let i = l.report.images.iter().position(|im| im.file == s.image)?;
-        let d = l.detections.images.get(i)?.spheres.get(s.index)?;
+        let d = l
+            .detections
+            .images
+            .get(i)?
+            .spheres
+            .get(s.index)?
+            .medium_outline?;
         let outline = d.outline.outline();
         let at = match drawn.iter().position(|o| o.outline == outline) {
             Some(at) => at,
@@ -192,7 +233,7 @@ pub fn outline_error<'a>(
                 drawn.push(Drawn {
                     unit: outline.pixel_unit(&l.proj),
                     outline,
-                    std_px: d.silhouette_std_px,
+                    std_px: d.std_px,
                 });
                 drawn.len() - 1
             }

@@ -29,7 +29,7 @@ mod summary;
 use file::{fit_file, predictions};
 use load::{cached, load_inspected};
 pub use load::{fingerprint, load, Loaded};
-pub use medium::{outline_error, PROFILE};
+pub use medium::{medium_spheres, outline_error, PROFILE};
 pub use options::{Options, SolveModel};
 use outcome::{paper_outcome, Outcome};
 pub use replot::{load_fit, replot};
@@ -126,12 +126,14 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let (spheres, holdout) = predictions(opts, &l, &outcome);
     l.timings.holdout_s = t_hold.elapsed().as_secs_f64();
     pb.inc(1);
-    let medium = (opts.model == SolveModel::Medium)
-        .then(|| {
-            let source = irradiance::source(reference.as_ref());
-            medium::run(opts, (&l, &source), &outcome, is_held, &mut notes)
-        })
+    // The medium's pixels are seated on the outlines drawn for it.
+    let medium_spheres = (opts.model == SolveModel::Medium)
+        .then(|| medium::medium_spheres(&l, &l.spheres))
         .flatten();
+    let medium = medium_spheres.as_ref().and_then(|spheres| {
+        let source = irradiance::source(reference.as_ref());
+        medium::run(opts, (&l, &source), spheres, &outcome, is_held, &mut notes)
+    });
     l.timings.medium_s = medium.as_ref().map_or(0.0, |m| m.seconds);
     let mut fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
     fit.options = asked;
@@ -141,7 +143,12 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     roots.extend(opts.plots.as_deref());
     let set = crate::formats::output::OutputSet::begin(&roots)?;
     if let Some(dir) = &opts.plots {
-        crate::figures::fitplot::write_all(&fit, &out, &l.spheres, dir)?;
+        crate::figures::fitplot::write_all(
+            &fit,
+            &out,
+            (&l.spheres, medium_spheres.as_deref()),
+            dir,
+        )?;
     }
     crate::formats::output::write_json(&out, &fit)?;
     set.commit()?;

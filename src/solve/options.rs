@@ -2,7 +2,6 @@
 //! figures) and the fit's settings ([`Settings`], the one settings type of a fit).
 
 use crate::fit::joint::Settings;
-use crate::formats::detections::EdgeWeights;
 use crate::formats::fit::Method;
 use std::path::PathBuf;
 
@@ -62,14 +61,12 @@ pub enum SolveModel {
 }
 
 impl SolveModel {
-    /// How detection weighs the outlines' rim for this model: by the sectors' noise for the CDRF
-    /// (whose own synthetic sessions' light coverage rests on it), by their contrast too for the
-    /// medium (the physically based renders' outlines come out nearer their truth;
-    /// docs/measurements/detection.md, "Each sector weighted by its rim's contrast").
-    pub fn edge_weights(self) -> EdgeWeights {
-        match self {
-            SolveModel::Cdrf => EdgeWeights::Noise,
-            SolveModel::Medium => EdgeWeights::Contrast,
-        }
+    /// Whether this model needs the outlines drawn for the medium fit too (detections.json's
+    /// `medium_outline`: the rim weighed by its contrast as well, where the physically based
+    /// renders' outlines come out nearer their truth; docs/measurements/detection.md, "Each
+    /// sector weighted by its rim's contrast"). The outlines the CDRF, the highlights and the
+    /// light use are the same either way.
+    pub fn medium_outlines(self) -> bool {
+        self == SolveModel::Medium
     }
 }

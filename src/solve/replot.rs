@@ -11,8 +11,14 @@ use std::path::{Path, PathBuf};
 pub fn replot(fit_path: &Path, dir: &Path, quiet: bool) -> Result<Vec<PathBuf>> {
     crate::formats::output::check_roots(&[dir])?;
     let (fit, l) = load_fit(fit_path, quiet)?;
+    let medium = fit
+        .medium
+        .is_some()
+        .then(|| super::medium_spheres(&l, &l.spheres))
+        .flatten();
     let set = crate::formats::output::OutputSet::begin(&[dir])?;
-    let files = crate::figures::fitplot::write_all(&fit, fit_path, &l.spheres, dir)?;
+    let files =
+        crate::figures::fitplot::write_all(&fit, fit_path, (&l.spheres, medium.as_deref()), dir)?;
     set.commit()?;
     Ok(files)
 }
@@ -29,7 +35,8 @@ pub fn load_fit(fit_path: &Path, quiet: bool) -> Result<(FitFile, super::Loaded)
     // Detections are looked for beside the session, then beside the fit (as `solve --out` left
     // them); nothing is written into a session folder that is not the fit's.
     opts.out = Some(fit_path.to_path_buf());
-    // A medium fit's outlines are the medium's (`SolveModel::edge_weights`).
+    // A medium fit's pixels are seated on the outlines drawn for it
+    // (`SolveModel::medium_outlines`, [`super::medium_spheres`]).
     if fit.medium.is_some() {
         opts.model = super::SolveModel::Medium;
     }

@@ -152,12 +152,19 @@ pub fn close_loop(fit_path: &Path, dir: &Path, opts: &Options) -> Result<Written
     let t0 = Instant::now();
     let (fit, l) = crate::solve::load_fit(fit_path, opts.quiet)?;
     let m = fit.medium(fit_path)?;
+    // Each sphere where the outline drawn for the medium puts it, its pixels seated there.
+    let spheres = crate::solve::medium_spheres(&l, &l.spheres).ok_or_else(|| {
+        Error::invalid(
+            fit_path,
+            "its session's detections hold no outlines drawn for the medium",
+        )
+    })?;
     let cam = camera(&l, fit_path)?;
     let rendered = rendered_medium(m);
     let light = fit.params().light.direction();
-    let pb = crate::progress::bar(l.spheres.len() as u64, "path tracing", opts.quiet);
+    let pb = crate::progress::bar(spheres.len() as u64, "path tracing", opts.quiet);
     let mut per_sphere: Vec<(&SphereData, Vec<Row>)> = Vec::new();
-    for (k, s) in l.spheres.iter().enumerate() {
+    for (k, s) in spheres.iter().enumerate() {
         let centre = centre(&l, s, fit_path)?;
         let scene = Scene {
             sphere: Sphere::new(centre, s.radius_mm),
@@ -198,15 +205,15 @@ fn camera(l: &crate::solve::Loaded, fit_path: &Path) -> Result<Camera> {
     }
 }
 
-/// The sphere's centre as the detector placed it (camera frame, mm).
+/// The sphere's centre as the outline drawn for the medium places it (camera frame, mm).
 fn centre(l: &crate::solve::Loaded, s: &SphereData, fit_path: &Path) -> Result<Vector3<f64>> {
     l.detections
         .images
         .iter()
         .find(|i| i.file == s.image)
         .and_then(|i| i.spheres.get(s.index))
-        .and_then(|d| d.center_mm)
-        .map(Vector3::from)
+        .and_then(|d| d.medium_outline)
+        .and_then(|m| m.outline.outline().center_mm(s.radius_mm))
         .ok_or_else(|| {
             Error::invalid(
                 fit_path,

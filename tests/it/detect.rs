@@ -5,7 +5,7 @@ use crate::common;
 use nalgebra::{Vector2, Vector3};
 use std::path::Path;
 use workbench::detect::{self, Options};
-use workbench::formats::detections::{Detections, EdgeWeights, OutlineJson};
+use workbench::formats::detections::{Detections, OutlineJson};
 use workbench::synth::session::{self, Layout, SessionConfig, SessionTruth};
 
 fn run(dir: &Path) -> workbench::Result<Detections> {
@@ -14,7 +14,7 @@ fn run(dir: &Path) -> workbench::Result<Detections> {
         out: None,
         overlays: true,
         quiet: true,
-        edge_weights: Default::default(),
+        medium_outlines: false,
     })
 }
 
@@ -644,7 +644,7 @@ fn outline_centres_are_within_their_stated_errors() {
 }
 
 /// The mean errors (px) of a session's detected outlines against truth.json: [radius, centre x].
-fn outline_mean_errors(dir: &Path) -> [f64; 2] {
+fn outline_mean_errors(dir: &Path, medium: bool) -> [f64; 2] {
     let read = |f: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
     };
@@ -667,12 +667,14 @@ fn outline_mean_errors(dir: &Path) -> [f64; 2] {
             .find(|i| i["file"] == im["file"])
             .unwrap();
         let (c, s) = (v(&tr["centre_mm"]), &im["spheres"][0]);
+        let outline = if medium {
+            &s["medium_outline"]["outline"]
+        } else {
+            &s["outline"]
+        };
         let (axis, half) = (
-            v(&s["outline"]["axis"]),
-            s["outline"]["half_angle_deg"]
-                .as_f64()
-                .unwrap()
-                .to_radians(),
+            v(&outline["axis"]),
+            outline["half_angle_deg"].as_f64().unwrap().to_radians(),
         );
         let distance = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
         let truth_half = (s["radius_mm"].as_f64().unwrap() / distance).asin();
@@ -682,14 +684,16 @@ fn outline_mean_errors(dir: &Path) -> [f64; 2] {
     sum.map(|e| e / images.len() as f64)
 }
 
-/// The rim weighed by its contrast as well (`detect --model medium`, what `solve --model medium`
-/// uses). On a path-traced jade-like session lit from the left (`datasets/pbr-seeds/jade-6`) the
-/// dim stretches of the translucent rim draw the noise-weighted outlines 0.13 px small and
-/// 0.16 px off-centre on average; the contrast-weighted ones 0.05 and 0.04 px
-/// (docs/measurements/detection.md, "Each sector weighted by its rim's contrast"). Asserted
-/// against truth.json: the contrast weights' mean radius and centre errors within 0.1 px, the
-/// noise weights' beyond it; detections.json says which; and `solve --model medium` detects
-/// again over the noise weights' detections, then reuses its own.
+/// The outlines drawn for the medium (`detect --model medium`, what `solve --model medium`
+/// uses), the rim weighed by its contrast as well. On a path-traced jade-like session lit from the
+/// left (`datasets/pbr-seeds/jade-6`) the dim stretches of the translucent rim draw the
+/// noise-weighted outlines 0.13 px small and 0.16 px off-centre on average; the medium's 0.05 and
+/// 0.04 px (docs/measurements/detection.md, "Each sector weighted by its rim's contrast").
+/// Asserted against truth.json: the medium's outlines' mean radius and centre errors within
+/// 0.1 px, the noise-weighted ones' beyond it; those (what the highlights, the light and the CDRF
+/// use) the same whichever model asked, to the bit; only the medium's detections hold the
+/// medium's outlines; and `solve --model medium` detects again over the CDRF's detections, then
+/// reuses its own.
 #[test]
 fn the_medium_weighs_the_rim_by_its_contrast() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-6");
@@ -703,13 +707,26 @@ fn the_medium_weighs_the_rim_by_its_contrast() {
             &std::fs::read_to_string(dir.path().join("detections.json")).unwrap(),
         )
         .unwrap();
-        (det.edge_weights, outline_mean_errors(dir.path()))
+        let errors = det
+            .has_medium_outlines()
+            .then(|| outline_mean_errors(dir.path(), true));
+        (det, outline_mean_errors(dir.path(), false), errors)
     };
-    let (contrast_weights, contrast) = detect("medium");
-    let (noise_weights, noise) = detect("cdrf");
-    println!("mean radius, centre x error (px): noise {noise:.3?}, contrast {contrast:.3?}");
-    assert_eq!(contrast_weights, EdgeWeights::Contrast);
-    assert_eq!(noise_weights, EdgeWeights::Noise);
+    let (with_medium, noise, contrast) = detect("medium");
+    let (cdrf, noise_cdrf, none) = detect("cdrf");
+    println!("mean radius, centre x error (px): noise {noise:.3?}, the medium's {contrast:.3?}");
+    let contrast = contrast.expect("the medium's outlines");
+    assert!(
+        none.is_none(),
+        "the CDRF's detections draw no medium outlines"
+    );
+    assert_eq!(noise, noise_cdrf);
+    for (a, b) in with_medium.images.iter().zip(&cdrf.images) {
+        for (x, y) in a.spheres.iter().zip(&b.spheres) {
+            assert_eq!(x.outline, y.outline);
+            assert_eq!(x.light_direction, y.light_direction);
+        }
+    }
     assert!(contrast.iter().all(|e| e.abs() < 0.1), "{contrast:?}");
     assert!(noise.iter().all(|e| e.abs() > 0.1), "{noise:?}");
     let solve = |extra: &[&str]| {
@@ -729,7 +746,7 @@ fn the_medium_weighs_the_rim_by_its_contrast() {
     let first = solve(&[]);
     assert!(
         first.contains(
-            "detection: ran (detections.json's outlines weighed the rim by noise, this model's by contrast)"
+            "detection: ran (detections.json has no outlines drawn for the medium, which --model medium needs)"
         ),
         "{first}"
     );

@@ -222,7 +222,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             out: None,
             overlays: false,
             quiet: true,
-            edge_weights: Default::default(),
+            medium_outlines: false,
         })?;
         let light = det.light_direction.map(Vector3::from);
         rows.push(Row {

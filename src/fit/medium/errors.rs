@@ -17,10 +17,10 @@ use nalgebra::{DMatrix, DVector};
 /// lies within 1.5 of its stated error; the jade-like renders, not used to set them, test them.
 /// Since the deepest shadow left the fit, the beams follow the transmitted light's mean
 /// direction, the pixels' noise is measured as a curve in the level ([`crate::fit::noise`]) and
-/// the outlines weigh the rim by its contrast (`formats::detections::EdgeWeights`), the same
-/// sessions' errors are σa −4.4 to +3.5% and σs′ +1.1 to +8.1% (docs/medium.md, "The noise
-/// curve with the outlines weighted by their contrast"): the terms are about twice what they
-/// need, and are kept while the jade-like fits lean on them.
+/// the medium's own outlines weigh the rim by its contrast (`detect::silhouette::EdgeWeights`),
+/// the same sessions' errors are σa −5.6 to +3.7% and σs′ +1.9 to +8.4% (docs/medium.md, "Each
+/// model its own outlines"): the terms are about twice what they need, and are kept while the
+/// jade-like fits lean on them.
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
 /// terms on σa and σs′ are scaled by [`misfit`] (as a scale factor widens measurements that
