@@ -449,42 +449,9 @@ impl Photo<'_> {
         if fit.inliers.len() < 20 {
             return Err(fail("too few silhouette edge points"));
         }
-        let refine = |start: &Outline, weights| {
-            silhouette::refine_repeated(
-                &[(lum, Some(&img.saturated))],
-                proj,
-                start,
-                (BAND_INNER_PX, BAND_OUTER_PX),
-                weights,
-            )
-        };
-        // The refinement may not wander off: it starts within a pixel of the edges.
-        let kept = |refined: &silhouette::Refined| {
-            let shift = fit.outline.distance_px(&refined.outline, proj);
-            if shift < (0.05 * fit.outline.radius_px(proj)).max(3.0) {
-                refined.outline
-            } else {
-                fit.outline
-            }
-        };
-        let refined = refine(&fit.outline, EdgeWeights::Noise)
+        let (refined, outline, medium) = self
+            .refined(&fit.outline)
             .ok_or_else(|| fail("silhouette refinement failed"))?;
-        let outline = kept(&refined);
-        // The medium's outline from the same start, its rim weighed by its contrast too (from
-        // the noise-weighted outline instead, jade-3's radius error grows from −0.15 to
-        // −0.20 px: the sector weights are the start's).
-        let medium = self
-            .medium
-            .then(|| match refine(&fit.outline, EdgeWeights::Contrast) {
-                Some(r) => MediumOutline {
-                    outline: kept(&r),
-                    std_px: r.std_px,
-                },
-                None => MediumOutline {
-                    outline,
-                    std_px: refined.std_px,
-                },
-            });
         Ok(Silhouette {
             radius_mm,
             outline,
@@ -496,6 +463,49 @@ impl Photo<'_> {
             inlier_px: fit.inliers.iter().map(|&i| edges[i].px).collect(),
             medium,
         })
+    }
+
+    /// The RANSAC outline `start` refined on the edge model with the noise weights (kept where
+    /// it stays within 5% of the radius, else `start`), and, where the medium was asked for,
+    /// refined from the same start with the contrast weights too ([`MediumOutline`]; where that
+    /// fails, the noise-weighted outline). From the noise-weighted outline instead, jade-3's
+    /// radius error grows from −0.15 to −0.20 px: the sector weights are the start's. None where
+    /// the noise-weighted refinement fails.
+    fn refined(
+        &self,
+        start: &Outline,
+    ) -> Option<(silhouette::Refined, Outline, Option<MediumOutline>)> {
+        let refine = |weights| {
+            silhouette::refine_repeated(
+                &[(self.lum, Some(&self.img.saturated))],
+                self.proj,
+                start,
+                (BAND_INNER_PX, BAND_OUTER_PX),
+                weights,
+            )
+        };
+        // The refinement may not wander off: it starts within a pixel of the edges.
+        let kept = |refined: &silhouette::Refined| {
+            let shift = start.distance_px(&refined.outline, self.proj);
+            if shift < (0.05 * start.radius_px(self.proj)).max(3.0) {
+                refined.outline
+            } else {
+                *start
+            }
+        };
+        let refined = refine(EdgeWeights::Noise)?;
+        let outline = kept(&refined);
+        let medium = self.medium.then(|| match refine(EdgeWeights::Contrast) {
+            Some(r) => MediumOutline {
+                outline: kept(&r),
+                std_px: r.std_px,
+            },
+            None => MediumOutline {
+                outline,
+                std_px: refined.std_px,
+            },
+        });
+        Some((refined, outline, medium))
     }
 }
 
