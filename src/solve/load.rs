@@ -74,6 +74,9 @@ fn reusable(
     if let Some(why) = fingerprint::differs(&d.inputs, now) {
         return Err(format!("detections.json is stale: {why}"));
     }
+    if d.edge_weights.as_deref() == Some("contrast") {
+        return Err("detections.json's outlines were drawn for the medium alone, by an earlier build (its \"edge_weights\": \"contrast\")".into());
+    }
     if medium && !d.has_medium_outlines() {
         return Err(
             "detections.json has no outlines drawn for the medium, which --model medium needs"

@@ -757,3 +757,37 @@ fn the_medium_weighs_the_rim_by_its_contrast() {
         "{second}"
     );
 }
+
+/// A detections.json from the builds of 2026-12-07 that drew every outline for the medium under
+/// `--model medium` (`"edge_weights": "contrast"`): its `outline`s are not the ones the CDRF
+/// and the light use, so a solve for either model detects again rather than reuse it, and says
+/// why; the file it writes has both outlines and no such field.
+#[test]
+fn an_earlier_builds_medium_outlines_are_not_reused() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/soap-2");
+    let dir = common::session_copy(&src);
+    let d = dir.path().to_str().unwrap();
+    let det = dir.path().join("detections.json");
+    for model in ["cdrf", "medium"] {
+        let (code, _, err) =
+            common::wb(&["--quiet", "detect", d, "--no-overlays", "--model", model]);
+        assert_eq!(code, 0, "{err}");
+        let mut j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&det).unwrap()).unwrap();
+        j["edge_weights"] = "contrast".into();
+        std::fs::write(&det, serde_json::to_string(&j).unwrap()).unwrap();
+        let (code, out, err) = common::wb(&["solve", d, "--model", model]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            format!("{out}{err}").contains(
+                "detection: ran (detections.json's outlines were drawn for the medium alone"
+            ),
+            "{model}: {out}{err}"
+        );
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&det).unwrap()).unwrap();
+        assert!(j.get("edge_weights").is_none());
+        let medium = j["images"][0]["spheres"][0].get("medium_outline").is_some();
+        assert_eq!(medium, model == "medium");
+    }
+}
