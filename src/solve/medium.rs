@@ -337,9 +337,16 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
         ));
     }
     if !f.at_bounds.is_empty() {
+        // η and α are shared by every channel: σa and σs′ were fitted with them.
+        let shared = f.at_bounds.iter().any(|p| p == "η" || p == "α");
         notes.push(format!(
-            "medium: {} ended at the edge of the range the fit explores (docs/medium.md): the photos pull it beyond what the model can say, so its value and error are not a measurement",
-            f.at_bounds.join(", ")
+            "medium: {} ended at or near the edge of the range the fit explores (docs/medium.md): the photos pull it beyond what the model can say, so its value and error are not a measurement{}",
+            f.at_bounds.join(", "),
+            if shared {
+                ", nor are σa's and σs′'s, fitted with it"
+            } else {
+                ""
+            }
         ));
     }
     if !f.converged {
@@ -389,11 +396,13 @@ fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
     let wide: Vec<String> = (0..3)
         .filter(|&c| beyond_relative_range(q.value[c], q.std[c]))
         .map(|c| {
-            format!(
-                "{} ± {:.0}%",
-                ["red", "green", "blue"][c],
-                100.0 * q.std[c] / q.value[c].abs()
-            )
+            let name = ["red", "green", "blue"][c];
+            if q.std[c].is_finite() {
+                format!("{name} ± {:.0}%", 100.0 * q.std[c] / q.value[c].abs())
+            } else {
+                // At its range's edge: no error (fit.json's null).
+                format!("{name} not determined")
+            }
         })
         .collect();
     (!wide.is_empty()).then(|| wide.join(", "))

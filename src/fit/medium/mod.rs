@@ -69,7 +69,8 @@ pub struct MediumFit {
     pub profiles: usize,
     pub evaluations: usize,
     pub converged: bool,
-    /// Parameters that ended at the edge of their range (σa_r, σs′_g, η, …).
+    /// Parameters that ended at or near the edge of their range (σa_r, σs′_g, η, …;
+    /// `problem::EDGE_MARGIN`).
     pub at_bounds: Vec<String>,
     /// Where η came from: the joint fit's and the pixels' (first stage) estimates.
     pub eta_sources: EtaSources,
