@@ -337,16 +337,10 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
         ));
     }
     if !f.at_bounds.is_empty() {
-        // η and α are shared by every channel: σa and σs′ were fitted with them.
-        let shared = f.at_bounds.iter().any(|p| p == "η" || p == "α");
         notes.push(format!(
             "medium: {} ended at or near the edge of the range the fit explores (docs/medium.md): the photos pull it beyond what the model can say, so its value and error are not a measurement{}",
             f.at_bounds.join(", "),
-            if shared {
-                ", nor are σa's and σs′'s, fitted with it"
-            } else {
-                ""
-            }
+            fitted_with(&f.at_bounds)
         ));
     }
     if !f.converged {
@@ -392,6 +386,31 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
 /// The channels of `q` whose stated error is past the joint fit's plausible range for a positive
 /// parameter ([`beyond_relative_range`]), each with its relative error, as "red ± 110%, blue ±
 /// 64%"; None if none.
+/// What was fitted with the parameters `at_bounds` names and so is no measurement either: σa
+/// and σs′ where η or α is there (every channel shares them), else each one's partner in its
+/// channel (σa_r with σs′_r). Empty where there is none.
+fn fitted_with(at_bounds: &[String]) -> String {
+    if at_bounds.iter().any(|p| p == "η" || p == "α") {
+        return ", nor are σa's and σs′'s, fitted with it".into();
+    }
+    let partners: Vec<String> = at_bounds
+        .iter()
+        .filter_map(|p| {
+            let other = match p.split_once('_')? {
+                ("σa", c) => format!("σs′_{c}"),
+                ("σs′", c) => format!("σa_{c}"),
+                _ => return None,
+            };
+            (!at_bounds.contains(&other)).then_some(format!("{other}'s"))
+        })
+        .collect();
+    match partners.len() {
+        0 => String::new(),
+        1 => format!(", nor is {}, fitted with it", partners[0]),
+        _ => format!(", nor are {}, fitted with them", partners.join(" and ")),
+    }
+}
+
 fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
     let wide: Vec<String> = (0..3)
         .filter(|&c| beyond_relative_range(q.value[c], q.std[c]))
@@ -487,5 +506,29 @@ fn carried_std(f: &MediumFit, s: &[f64]) -> CarriedStdJson {
     CarriedStdJson {
         sigma_a_per_mm: std::array::from_fn(|c| f.media[c].sigma_a * s[c]),
         sigma_s_reduced_per_mm: std::array::from_fn(|c| f.media[c].sigma_s_reduced * s[3 + c]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fitted_with;
+
+    #[test]
+    fn what_was_fitted_with_a_parameter_at_its_edge_is_said() {
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            fitted_with(&names(&["η", "α"])),
+            ", nor are σa's and σs′'s, fitted with it"
+        );
+        assert_eq!(
+            fitted_with(&names(&["σs′_r"])),
+            ", nor is σa_r's, fitted with it"
+        );
+        assert_eq!(
+            fitted_with(&names(&["σa_g", "σs′_b"])),
+            ", nor are σs′_g's and σa_b's, fitted with them"
+        );
+        assert_eq!(fitted_with(&names(&["σa_r", "σs′_r"])), "");
+        assert_eq!(fitted_with(&[]), "");
     }
 }

@@ -1009,6 +1009,12 @@ fn the_medium_of_the_soap_renders() {
         assert!(ea.abs() < 0.05 && es.abs() < 0.05, "channel {c}: {ea} {es}");
     }
     assert!(m.residual_over_noise < 1.1, "{}", m.residual_over_noise);
+    // Every value 1.5 times or more inside its range's edges: none said to be near one.
+    assert!(
+        !f.notes.iter().any(|n| n.contains("edge of the range")),
+        "{:?}",
+        f.notes
+    );
     let h = m.holdout.expect("the held-out radius");
     println!(
         "held out: medium {:.4}, CDRF {:.4}",
@@ -1021,6 +1027,47 @@ fn the_medium_of_the_soap_renders() {
     exports_read_back(&dir.path().join("fit.json"), m);
     the_loop_closes(&dir.path().join("fit.json"), m);
     the_medium_fit_is_drawn(&dir.path().join("fit.json"));
+}
+
+/// A medium at a corner of the range that the diffusion model cannot place
+/// (`datasets/pbr-range/thin-dark`: σt 0.5 /mm, albedo 0.70/0.75/0.80, η 1.6, GGX α 0.1: most
+/// light leaves after a few scatterings). Measured (2026-12-07, 15 mm held out): the fit meets
+/// the photos' noise (residuals 1.20 of it, wave 7.4, below the misfit note's 1.5 and 7.8) by
+/// running η to 2.48 and α to 0.594, near their range's walls (2.5, 0.6), with σs′ +197 to
+/// +200% and σa −56 to −66% off against stated errors of 20–22%, 9 of them (docs/medium.md,
+/// "Across the range"). Asserted: what the fit states is not trusted silently, every
+/// σa, σs′ and η within 2 of its stated std or a note saying η and α ended near their range's
+/// edge and σa and σs′ are no measurement either; and that note is said here.
+#[test]
+fn a_medium_the_model_cannot_place_is_said() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-range/thin-dark");
+    let (_dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
+    let m = f.medium.as_ref().expect("fit.json's medium");
+    let mut worst = (m.eta.value - t.media[0].eta).abs() / m.eta.std;
+    for c in 0..3 {
+        for (name, fitted, truth) in [
+            ("σa", &m.sigma_a_per_mm, t.media[c].sigma_a),
+            ("σs′", &m.sigma_s_reduced_per_mm, t.media[c].sigma_s_reduced),
+        ] {
+            let z = (fitted.value[c] - truth).abs() / fitted.std[c];
+            println!(
+                "channel {c}: {name} {:+.1}% ± {:.1}% ({z:.1} std)",
+                100.0 * (fitted.value[c] / truth - 1.0),
+                100.0 * fitted.std[c] / truth
+            );
+            worst = worst.max(z);
+        }
+    }
+    println!(
+        "η {:.3} ± {:.3}, α {:.3}; worst error {worst:.1} std; notes {:?}",
+        m.eta.value, m.eta.std, m.alpha, f.notes
+    );
+    let said = f.notes.iter().any(|n| {
+        n.starts_with("medium: η, α ended at or near the edge")
+            && n.contains("nor are σa's and σs′'s")
+    });
+    assert!(worst < 2.0 || said, "{worst}: {:?}", f.notes);
+    assert!(said, "{:?}", f.notes);
 }
 
 /// The bundled physically based jade (../shared/data/pbr-jade, its five single-sphere photos:

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Render the four corners of the issue's range of media (datasets/pbr-range/, docs/medium.md,
+# "Across the issue's range"): σt 0.5 and 3 /mm, albedo 0.70–0.80 and 0.985–0.995, η 1.3 and
+# 1.6, each session under its own light and noise seed, as the coverage sessions of
+# scripts/pbr-seeds.sh (640×480, fx 800, 1024 samples a pixel; 30–55 s a session on 2 cores).
+# The suite solves thin-dark (`medium::a_medium_the_model_cannot_place_is_said`); the table in
+# docs/medium.md solves all four.
+# Usage: scripts/pbr-range.sh [path/to/workbench] [output dir]   (default: datasets/pbr-range)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+wb=${1:-target/release/workbench}
+out=${2:-datasets/pbr-range}
+mkdir -p "$out"
+# name        σt   albedo r,g,b         η     α     azimuth elevation seed
+sessions=(
+  "dense-dark   3.0  0.70,0.75,0.80      1.30  0.10   35  25  31"
+  "dense-white  3.0  0.995,0.99,0.985    1.60  0.10  -40  20  32"
+  "thin-dark    0.5  0.70,0.75,0.80      1.60  0.10   50  15  33"
+  "thin-white   0.5  0.995,0.99,0.985    1.30  0.10  -55  30  34"
+)
+for s in "${sessions[@]}"; do
+  read -r name sigma_t albedo eta alpha az el seed <<<"$s"
+  "$wb" --quiet synth pbr --out "$out/$name" --size 640x480 --fx 800 --distance 500 \
+    --spp 1024 --sigma-t "$sigma_t" --albedo "$albedo" --eta "$eta" --alpha "$alpha" \
+    --light-azimuth "$az" --light-elevation "$el" --material "$name" --seed "$seed"
+  echo "$name rendered"
+done
