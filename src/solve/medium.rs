@@ -383,9 +383,6 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     }
 }
 
-/// The channels of `q` whose stated error is past the joint fit's plausible range for a positive
-/// parameter ([`beyond_relative_range`]), each with its relative error, as "red ± 110%, blue ±
-/// 64%"; None if none.
 /// What was fitted with the parameters `at_bounds` names and so is no measurement either: σa
 /// and σs′ where η or α is there (every channel shares them), else each one's partner in its
 /// channel (σa_r with σs′_r). Empty where there is none.
@@ -411,6 +408,9 @@ fn fitted_with(at_bounds: &[String]) -> String {
     }
 }
 
+/// The channels of `q` whose stated error is past the joint fit's plausible range for a positive
+/// parameter ([`beyond_relative_range`]), each with its relative error, as "red ± 110%, blue ±
+/// 64%", or "red not determined" where its error is none (at its range's edge); None if none.
 fn poorly_determined(q: &medium::PerChannel) -> Option<String> {
     let wide: Vec<String> = (0..3)
         .filter(|&c| beyond_relative_range(q.value[c], q.std[c]))
