@@ -11,13 +11,8 @@
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
 set -uo pipefail
 cd "$(dirname "$0")/.."
-wb=$(realpath "${1:-target/release/workbench}")
-out=${2:-$(mktemp -d)}
-shift 2 2>/dev/null || shift $#
-mkdir -p "$out"
 source scripts/lib/pbr-sessions.sh
-sessions=("$@")
-[ ${#sessions[@]} -eq 0 ] && sessions=("${PBR_SESSIONS[@]}")
+pbr_args "$@"
 for s in "${sessions[@]}"; do
   d="$out/$s"
   rm -f "$d.fit.json"

@@ -20,13 +20,8 @@ if [ "${1:-}" = --model ]; then
   model=$2
   shift 2
 fi
-wb=$(realpath "${1:-target/release/workbench}")
-out=${2:-$(mktemp -d)}
-shift 2 2>/dev/null || shift $#
-mkdir -p "$out"
 source scripts/lib/pbr-sessions.sh
-sessions=("$@")
-[ ${#sessions[@]} -eq 0 ] && sessions=("${PBR_SESSIONS[@]}")
+pbr_args "$@"
 for s in "${sessions[@]}"; do
   d="$out/$s"
   copy_session "$s" "$d"

@@ -10,18 +10,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 wb=${1:-target/release/workbench}
 out=${2:-datasets/pbr-range}
-mkdir -p "$out"
-# name        σt   albedo r,g,b         η     α     azimuth elevation seed
-sessions=(
-  "dense-dark   3.0  0.70,0.75,0.80      1.30  0.10   35  25  31"
-  "dense-white  3.0  0.995,0.99,0.985    1.60  0.10  -40  20  32"
-  "thin-dark    0.5  0.70,0.75,0.80      1.60  0.10   50  15  33"
-  "thin-white   0.5  0.995,0.99,0.985    1.30  0.10  -55  30  34"
-)
-for s in "${sessions[@]}"; do
-  read -r name sigma_t albedo eta alpha az el seed <<<"$s"
-  "$wb" --quiet synth pbr --out "$out/$name" --size 640x480 --fx 800 --distance 500 \
-    --spp 1024 --sigma-t "$sigma_t" --albedo "$albedo" --eta "$eta" --alpha "$alpha" \
-    --light-azimuth "$az" --light-elevation "$el" --material "$name" --seed "$seed"
-  echo "$name rendered"
-done
+source scripts/lib/pbr-render.sh
+# name        σt   albedo r,g,b         η     α     azimuth elevation seed material
+render_sessions "$wb" "$out" \
+  "dense-dark   3.0  0.70,0.75,0.80      1.30  0.10   35  25  31  dense-dark" \
+  "dense-white  3.0  0.995,0.99,0.985    1.60  0.10  -40  20  32  dense-white" \
+  "thin-dark    0.5  0.70,0.75,0.80      1.60  0.10   50  15  33  thin-dark" \
+  "thin-white   0.5  0.995,0.99,0.985    1.30  0.10  -55  30  34  thin-white"

@@ -3,6 +3,9 @@
 # PBR_SESSIONS: their names. copy_session <name> <dir>: a fresh copy of one into <dir>
 # (datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade with its five single-sphere
 # photos, datasets/pbr-seeds/*), without what a run leaves (detections.json, fit.json, overlays).
+# pbr_args [path/to/workbench] [scratch dir] [session names…]: the scripts' arguments, as $wb
+# (absolute), $out (made; a new temporary folder if not given) and $sessions (all of
+# PBR_SESSIONS if none is named).
 PBR_SESSIONS=(pbr-soap pbr-wax pbr-jade soap-2 soap-5 soap-8 wax-1 wax-4 wax-7 jade-3 jade-6)
 
 copy_session() {
@@ -23,4 +26,13 @@ PY
     *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
   esac
   rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"
+}
+
+pbr_args() {
+  wb=$(realpath "${1:-target/release/workbench}")
+  out=${2:-$(mktemp -d)}
+  shift 2 2>/dev/null || shift $#
+  mkdir -p "$out"
+  sessions=("$@")
+  [ ${#sessions[@]} -eq 0 ] && sessions=("${PBR_SESSIONS[@]}")
 }

@@ -668,9 +668,7 @@ pub fn figures(
         });
     }
     if let Some(m) = &fit.medium {
-        // The medium's pixels are seated on its own outlines, where given.
-        let seated = medium.map(|spheres| self::groups(fit, spheres));
-        let medium = medium_groups(fit, m, seated.as_deref().unwrap_or(&groups));
+        let medium = medium_groups(fit, m, &groups, medium);
         out.push(Named {
             name: "medium-radiance-theta".into(),
             caption: "The medium fit (solve --model medium): its pixels (off the highlight and the rim, θ up to 105°) against θ per channel, per radius, its model's prediction as solid curves.".into(),
@@ -689,20 +687,34 @@ pub fn figures(
 /// The spheres by radius under the medium fit (fit.json's `"medium"`): each sphere's pixels the
 /// medium fit uses ([`crate::fit::medium::fitted`] under the joint fit's light, every channel
 /// weighted) with its model's prediction there ([`crate::fit::medium::predict_with`], the
-/// profiles computed once a radius), in the colours and scales of `groups`.
-fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec<Group<'a>> {
+/// profiles computed once a radius), in the colours and scales of `groups`. Each sphere's
+/// pixels are its counterpart's in `seated` where given (the same sphere seated on the outline
+/// drawn for the medium, `solve::medium::medium_spheres`).
+fn medium_groups<'a>(
+    fit: &FitFile,
+    m: &MediumJson,
+    groups: &[Group<'a>],
+    seated: Option<&'a [SphereData]>,
+) -> Vec<Group<'a>> {
     use crate::fit::medium::{self, Px, Radius};
     let angle = |a: f64| a.clamp(-1.0, 1.0).acos().to_degrees();
+    let seated_of = |s: &'a SphereData| -> &'a SphereData {
+        seated
+            .and_then(|all| {
+                all.iter()
+                    .find(|x| x.image == s.image && x.index == s.index)
+            })
+            .unwrap_or(s)
+    };
     groups
         .par_iter()
         .map(|g| {
             let light = fit.params_for(g.radius_mm).light.direction();
+            let spheres: Vec<&SphereData> = g.spheres.iter().map(|e| seated_of(e.sphere)).collect();
             // Per sphere: the indices of its observations the medium fit uses.
-            let chosen: Vec<Vec<usize>> = g
-                .spheres
+            let chosen: Vec<Vec<usize>> = spheres
                 .iter()
-                .map(|e| {
-                    let s = e.sphere;
+                .map(|s| {
                     let stride = (s.obs.len() / PIXELS).max(1);
                     (0..s.obs.len())
                         .step_by(stride)
@@ -711,10 +723,10 @@ fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec
                 })
                 .collect();
             let obs = || {
-                g.spheres
+                spheres
                     .iter()
                     .zip(&chosen)
-                    .flat_map(|(e, idx)| idx.iter().map(move |&i| &e.sphere.obs[i]))
+                    .flat_map(|(s, idx)| idx.iter().map(move |&i| &s.obs[i]))
             };
             let px = |c: usize| -> Vec<Px> {
                 obs()
@@ -730,12 +742,10 @@ fn medium_groups<'a>(fit: &FitFile, m: &MediumJson, groups: &[Group<'a>]) -> Vec
             };
             let model = medium::predict_with(m.media(), m.irradiance.value, m.alpha, &radius);
             let mut at = 0;
-            let spheres = g
-                .spheres
+            let spheres = spheres
                 .iter()
                 .zip(&chosen)
-                .map(|(e, idx)| {
-                    let s = e.sphere;
+                .map(|(&s, idx)| {
                     let rows = at..at + idx.len();
                     at += idx.len();
                     Evaluated {

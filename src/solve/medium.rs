@@ -56,22 +56,30 @@ pub fn medium_spheres(l: &Loaded, spheres: &[SphereData]) -> Option<Vec<SphereDa
             let outline = d.medium_outline?.outline.outline();
             let turn = l.frames.as_ref().and_then(|f| f.get(i).copied());
             let mut seated = s.clone();
-            for (o, [x, y]) in seated.obs.iter_mut().zip(&s.px) {
-                let Some(surf) = l
-                    .proj
-                    .point(nalgebra::Vector2::new(*x as f64, *y as f64))
-                    .and_then(|q| outline.surface(&q))
-                else {
-                    continue;
-                };
-                (o.geometry.normal, o.geometry.view) = match turn {
-                    Some(r) => (r * surf.normal, r * surf.view),
-                    None => (surf.normal, surf.view),
-                };
+            for (o, &px) in seated.obs.iter_mut().zip(&s.px) {
+                if let Some(seen) = seen_under(&l.proj, &outline, turn, px) {
+                    (o.geometry.normal, o.geometry.view) = seen;
+                }
             }
             Some(seated)
         })
         .collect()
+}
+
+/// The normal and view at pixel `px` under `outline`, turned by its photo's `turn` onto the
+/// common light frame; None where the pixel's ray misses the outline's sphere.
+fn seen_under(
+    proj: &crate::camera::outline::Projection,
+    outline: &Outline,
+    turn: Option<nalgebra::Rotation3<f64>>,
+    [x, y]: [u32; 2],
+) -> Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)> {
+    let q = proj.point(nalgebra::Vector2::new(x as f64, y as f64))?;
+    let surf = outline.surface(&q)?;
+    Some(match turn {
+        Some(r) => (r * surf.normal, r * surf.view),
+        None => (surf.normal, surf.view),
+    })
 }
 
 /// The medium fit after the joint fit `outcome`, on the `spheres` (seated on the medium's
@@ -268,13 +276,7 @@ pub fn outline_error<'a>(
                 if *at != k / 3 {
                     return None;
                 }
-                let [x, y] = fitted[i].px[p];
-                let q = proj.point(nalgebra::Vector2::new(x as f64, y as f64))?;
-                let surf = moved.surface(&q)?;
-                Some(match turn {
-                    Some(r) => (r * surf.normal, r * surf.view),
-                    None => (surf.normal, surf.view),
-                })
+                seen_under(proj, &moved, *turn, fitted[i].px[p])
             })
         }),
         step: OUTLINE_STEP,
