@@ -8,7 +8,9 @@
 # give, the residuals over the noise, the held-out sphere's error (medium / CDRF), the
 # profiles, the medium fit's time and the whole solve's (fit.json's timings, and over decoding
 # the photos).
-# Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…]
+# Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…] (the eleven
+# by default; the four corners of datasets/pbr-range by name: dense-dark dense-white thin-dark
+# thin-white)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 source scripts/lib/pbr-sessions.sh
@@ -36,10 +38,11 @@ else:
     eta, alpha = m["eta"], m["alpha"]
 md = f["medium"]
 pct = lambda k, tr: [100 * (md[k]["value"][c] / tr[c] - 1) for c in range(3)]
-z = lambda k, tr: [abs(md[k]["value"][c] - tr[c]) / md[k]["std"][c] for c in range(3)]
+# A std of null (a parameter at its range's edge: no error stated) counts as no measurement.
+z = lambda k, tr: [abs(md[k]["value"][c] - tr[c]) / md[k]["std"][c] if md[k]["std"][c] else float("nan") for c in range(3)]
 ea, es = pct("sigma_a_per_mm", sa), pct("sigma_s_reduced_per_mm", ss)
 de = md["eta"]["value"] - eta
-worst = max(z("sigma_a_per_mm", sa) + z("sigma_s_reduced_per_mm", ss) + [abs(de) / md["eta"]["std"]])
+worst = max((v for v in z("sigma_a_per_mm", sa) + z("sigma_s_reduced_per_mm", ss) + [abs(de) / md["eta"]["std"]] if v == v), default=float("nan"))
 h = md.get("holdout") or {}
 al_std = md.get("alpha_std")
 nan = {"value": float("nan"), "std": float("nan")}
@@ -48,7 +51,7 @@ def part(k):  # the largest share of σa's and σs′'s values a carried input's
     p = md.get(k)
     if not p:
         return "—"
-    return f"{max(100 * p[q][c] / md[q]['value'][c] for q in ('sigma_a_per_mm', 'sigma_s_reduced_per_mm') for c in range(3)):.1f}%"
+    return f"{max(100 * p[q][c] / md[q]['value'][c] for q in ('sigma_a_per_mm', 'sigma_s_reduced_per_mm') for c in range(3) if p[q][c] is not None):.1f}%"
 print(f"{sys.argv[3]:8s} σa {ea[0]:+.1f} {ea[1]:+.1f} {ea[2]:+.1f}%  σs′ {es[0]:+.1f} {es[1]:+.1f} {es[2]:+.1f}%  "
       f"η {md['eta']['value']:.3f}±{md['eta']['std']:.3f} ({de:+.3f}; joint fit's "
       f"{src['joint']['value']:.3f}±{src['joint']['std']:.3f}, pixels' "

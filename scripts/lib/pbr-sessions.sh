@@ -2,7 +2,8 @@
 # (scripts/medium-sessions.sh, scripts/outline-errors.sh): source it from the repository root.
 # PBR_SESSIONS: their names. copy_session <name> <dir>: a fresh copy of one into <dir>
 # (datasets/pbr-soap, datasets/pbr-wax, ../shared/data/pbr-jade with its five single-sphere
-# photos, datasets/pbr-seeds/*), without what a run leaves (detections.json, fit.json, overlays).
+# photos, datasets/pbr-seeds/*; also the four corners of datasets/pbr-range/ by name), without
+# what a run leaves (detections.json, fit.json, overlays).
 # pbr_args [path/to/workbench] [scratch dir] [session names…]: the scripts' arguments, as $wb
 # (absolute), $out (made; a new temporary folder if not given) and $sessions (all of
 # PBR_SESSIONS if none is named).
@@ -23,6 +24,7 @@ s["images"] = [i for i in s["images"] if i["file"] != "row.png"]
 json.dump(s, open(p, "w"), indent=1)
 PY
       ;;
+    dense-dark | dense-white | thin-dark | thin-white) cp -r "datasets/pbr-range/$s" "$d" ;;
     *) cp -r "datasets/pbr-seeds/$s" "$d" ;;
   esac
   rm -rf "$d/detections.json" "$d/fit.json" "$d/overlays"

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::fit::joint::identify::beyond_relative_range;
 use crate::fit::medium::{
     self, misfit, Held, LightError, MediumFit, OutlineError, Radius, Setup, MODEL_ERROR,
-    WAVE_CALIBRATED,
+    RESTART_ETA, WAVE_CALIBRATED,
 };
 use crate::fit::observe::SphereData;
 use crate::formats::fit::{
@@ -336,6 +336,13 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
         notes.push(format!(
             "medium: residuals {:.1}× the noise, their means over 5° bands of θ {:.1}× theirs (at most {WAVE_CALIBRATED} on the wax and soap renders): the diffusion model does not describe these photos within their noise, and σa, σs′ carry that misfit (their stated errors are widened by it; docs/medium.md names what the model leaves out)",
             f.residual_over_noise, f.wave_over_noise
+        ));
+    }
+    if !f.restarted_from.is_empty() {
+        notes.push(format!(
+            "medium: started from the joint fit's η {:.3}, the fit ended with {} at the edge of the range it explores; from a second start at η {RESTART_ETA} it reached a lower cost, which is kept (docs/medium.md, \"A second start where the first ends at the walls\")",
+            f.eta_sources.joint.0,
+            f.restarted_from.join(", ")
         ));
     }
     if !f.at_bounds.is_empty() {

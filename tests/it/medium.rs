@@ -1029,17 +1029,18 @@ fn the_medium_of_the_soap_renders() {
     the_medium_fit_is_drawn(&dir.path().join("fit.json"));
 }
 
-/// A medium at a corner of the issue's range that the diffusion model cannot place
-/// (`datasets/pbr-range/thin-dark`: σt 0.5 /mm, albedo 0.70/0.75/0.80, η 1.6, GGX α 0.1: most
-/// light leaves after a few scatterings). Measured (2026-12-07, 15 mm held out): the fit meets
-/// the photos' noise (residuals 1.20 of it, wave 7.4, below the misfit note's 1.5 and 7.8) by
-/// running η to 2.48 and α to 0.594, near their range's walls (2.5, 0.6), with σs′ +197 to
-/// +200% and σa −56 to −66% off against stated errors of 20–22%, 9 of them (docs/medium.md,
-/// "Across the issue's range"). Asserted: what the fit states is not trusted silently, every
-/// σa, σs′ and η within 2 of its stated std or a note saying η and α ended near their range's
-/// edge and σa and σs′ are no measurement either; and that note is said here.
+/// A corner of the issue's range whose joint fit's η is far off (`datasets/pbr-range/thin-dark`:
+/// σt 0.5 /mm, albedo 0.70/0.75/0.80, η 1.6, GGX α 0.1; its highlights clipped over their core,
+/// so the lobe's height is not seen and the joint fit reads η 2.67). From that start the first
+/// stage ran η and α to their range's walls (2.48, 0.594) with residuals 1.20 of the noise, σs′
+/// +200% against a stated ± 20% (before 2026-12-07, later: said by the edge note only); from the
+/// second start at η 1.5 it reaches a lower cost. Measured (15 mm held out): the restart's note;
+/// σa −7.6, −8.9, −10.3%, σs′ +29.7, +27.7, +26.0% (± 23–24%), η 1.732 ± 0.123; every error
+/// within 1.24 of its std; residuals 1.05 of the noise (docs/medium.md, "A second start where the
+/// first ends at the walls"). Asserted: the note, no edge note, every error within 2 of its std,
+/// σa within 15% and η within 0.2 of the truth.
 #[test]
-fn a_medium_the_model_cannot_place_is_said() {
+fn a_first_start_at_the_walls_is_started_again() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-range/thin-dark");
     let (_dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
@@ -1051,23 +1052,40 @@ fn a_medium_the_model_cannot_place_is_said() {
         ] {
             let z = (fitted.value[c] - truth).abs() / fitted.std[c];
             println!(
-                "channel {c}: {name} {:+.1}% ± {:.1}% ({z:.1} std)",
+                "channel {c}: {name} {:+.1}% ± {:.1}% ({z:.2} std)",
                 100.0 * (fitted.value[c] / truth - 1.0),
                 100.0 * fitted.std[c] / truth
             );
             worst = worst.max(z);
         }
+        let off = (m.sigma_a_per_mm.value[c] / t.media[c].sigma_a - 1.0).abs();
+        assert!(off < 0.15, "σa channel {c} {off}");
     }
     println!(
-        "η {:.3} ± {:.3}, α {:.3}; worst error {worst:.1} std; notes {:?}",
+        "η {:.3} ± {:.3}, α {:.3}; worst error {worst:.2} std; notes {:?}",
         m.eta.value, m.eta.std, m.alpha, f.notes
     );
-    let said = f.notes.iter().any(|n| {
-        n.starts_with("medium: η, α ended at or near the edge")
-            && n.contains("nor are σa's and σs′'s")
-    });
-    assert!(worst < 2.0 || said, "{worst}: {:?}", f.notes);
-    assert!(said, "{:?}", f.notes);
+    assert!(
+        f.notes
+            .iter()
+            .any(|n| n.starts_with("medium: started from the joint fit's η")
+                && n.contains("with η, α at the edge")),
+        "{:?}",
+        f.notes
+    );
+    assert!(
+        !f.notes
+            .iter()
+            .any(|n| n.contains("ended at or near the edge")),
+        "{:?}",
+        f.notes
+    );
+    assert!(worst < 2.0, "{worst}");
+    assert!(
+        (m.eta.value - t.media[0].eta).abs() < 0.2,
+        "{}",
+        m.eta.value
+    );
 }
 
 /// The bundled physically based jade (../shared/data/pbr-jade, its five single-sphere photos:
@@ -1901,10 +1919,14 @@ fn the_renders_over_the_model_at_the_truth() {
     use workbench::fit::medium::{predict_with, Px, Radius};
     let name = std::env::var("SESSION").unwrap_or_else(|_| "pbr-wax".into());
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
-    let src = [root.join(&name), root.join("pbr-seeds").join(&name)]
-        .into_iter()
-        .find(|p| p.join("truth.json").exists())
-        .expect("a session with truth.json");
+    let src = [
+        root.join(&name),
+        root.join("pbr-seeds").join(&name),
+        root.join("pbr-range").join(&name),
+    ]
+    .into_iter()
+    .find(|p| p.join("truth.json").exists())
+    .expect("a session with truth.json");
     let dir = common::session_copy(&src);
     // `TRUTH_OUTLINES=1`: every sphere's outline replaced by the truth's (its centre from
     // truth.json), so the geometry is not the detector's.
@@ -2199,9 +2221,12 @@ fn the_outline_sensitivity_follows_refits() {
 fn the_fit_from_the_truths_inputs() {
     use workbench::fit::medium::{fit, pixels, start, Held, MediumFit, Setup};
     let name = std::env::var("SESSION").unwrap_or_else(|_| "jade-6".into());
-    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets/pbr-seeds")
-        .join(&name);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
+    let src = ["pbr-seeds", "pbr-range"]
+        .iter()
+        .map(|d| root.join(d).join(&name))
+        .find(|p| p.join("truth.json").exists())
+        .expect("a session of datasets/pbr-seeds or datasets/pbr-range");
     let dir = common::session_copy(&src);
     load_quiet(dir.path());
     truth_outlines(dir.path());

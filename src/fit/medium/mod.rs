@@ -74,6 +74,10 @@ pub struct MediumFit {
     pub at_bounds: Vec<String>,
     /// Where η came from: the joint fit's and the pixels' (first stage) estimates.
     pub eta_sources: EtaSources,
+    /// Where the first stage, from the given start, ended at the edge of the range of these
+    /// parameters and was started again from η [`RESTART_ETA`] to a lower cost
+    /// ([`first_stage`]): their names (empty when it was not).
+    pub restarted_from: Vec<String>,
     /// Per u, the first-order change with the light's azimuth and elevation (per radian; 0 at
     /// η, which is held), when the light's error was carried ([`LightError`]).
     pub light_sensitivity: Option<[DVector<f64>; 2]>,
@@ -270,13 +274,7 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         Some(_) => SphereAtlas::free(setup.alpha),
         None => SphereAtlas::new(setup.alpha),
     };
-    let free = solve(
-        radii,
-        setup,
-        &atlas,
-        DVector::from_column_slice(start),
-        false,
-    );
+    let (free, restarted) = first_stage(radii, setup, &atlas, start);
     let free_errors = errors::of(&free.0, None);
     // The pixels' η and its stated error (statistical and the model's own, as for any fit).
     let eta_minus_one = free.0.u[ETA].exp();
@@ -350,6 +348,7 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
             joint,
             pixels: (eta_px, eta_px_std),
         },
+        restarted_from: restarted,
         light_sensitivity,
         eta_sensitivity: errors.eta_sensitivity.clone(),
         std_light,
@@ -357,6 +356,65 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         std_outlines,
         seconds: t0.elapsed().as_secs_f64(),
     }
+}
+
+/// η of the first stage's second start ([`first_stage`]): the middle of the indices of the
+/// translucent solids the issue names (1.3–1.6, wax to jade), away from the range's walls.
+pub const RESTART_ETA: f64 = 1.5;
+
+/// The first stage (σa, σs′, η free) from `start`, and where it ended at the edge of its range
+/// ([`problem::at_bounds`]), again from a second start: the same diffusion length, η at
+/// [`RESTART_ETA`], the albedo chosen again for that η ([`start`]); the lower cost is kept, and
+/// with it the names of the parameters the first start left at the edge (empty when the first
+/// start's fit is kept).
+///
+/// The start's η is the joint fit's, and where the joint fit's η is far off the first stage can
+/// end in a minimum at the walls: on the thin-dark corner of the issue's range, whose highlight
+/// is clipped over its core, the joint fit's η is 2.67 (truth 1.6) and the first stage ran η
+/// and α to the walls (2.48, 0.594) with residuals 1.20 times the noise; from η 1.5 it ends at
+/// η 1.73 with residuals 1.05 times the noise (docs/medium.md, "A second start where the first
+/// ends at the walls"). A fit that ends inside its range is not started again, so this costs
+/// nothing where the start was good.
+fn first_stage<'a>(
+    radii: &'a [Radius],
+    setup: &'a Setup,
+    atlas: &'a SphereAtlas,
+    start_u: &[f64],
+) -> (
+    (Problem<'a>, levenberg_marquardt::MinimizationReport<f64>),
+    Vec<String>,
+) {
+    let first = solve(
+        radii,
+        setup,
+        atlas,
+        DVector::from_column_slice(start_u),
+        false,
+    );
+    let edges = problem::at_bounds(&physical(first.0.u.as_slice(), setup), setup);
+    if edges.is_empty() {
+        return (first, edges);
+    }
+    let again = start(
+        radii,
+        &Setup {
+            eta_prior: (RESTART_ETA, setup.eta_prior.1),
+            ..*setup
+        },
+        diffusion_lengths(&physical(start_u, setup).media),
+    );
+    let second = solve(radii, setup, atlas, DVector::from_vec(again), false);
+    if second.1.objective_function < first.1.objective_function {
+        (second, edges)
+    } else {
+        (first, vec![])
+    }
+}
+
+/// Each channel's diffusion length 1/σtr (mm), σtr = √(3 σa σt′): what [`start`] takes as the
+/// joint fit's σ0.
+fn diffusion_lengths(media: &[Medium; 3]) -> [f64; 3] {
+    media.map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt())
 }
 
 /// The free atlas's M is exact at its full nodes' roughness and within 4.6e-3 half a cell from
@@ -637,6 +695,24 @@ impl MediumFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The second start keeps the first's diffusion lengths: [`start`] sets each channel's
+    /// 1/σtr to the σ0 it is given, and [`diffusion_lengths`] reads them back (to rounding).
+    /// And a first stage that ends inside its range is kept as it is: the fixture, from its
+    /// truth, is not started again.
+    #[test]
+    fn the_second_start_keeps_the_diffusion_length() {
+        let (setup, radii, truth) = problem::tests::fixture();
+        let sigma0 = [0.7, 1.9, 3.2];
+        let u = start(&radii, &setup, sigma0);
+        let back = diffusion_lengths(&physical(&u, &setup).media);
+        for c in 0..3 {
+            assert!((back[c] / sigma0[c] - 1.0).abs() < 1e-12, "{back:?}");
+        }
+        let atlas = SphereAtlas::free(setup.alpha);
+        let (_, restarted) = first_stage(&radii, &setup, &atlas, &truth);
+        assert!(restarted.is_empty(), "{restarted:?}");
+    }
 
     /// The second stage's atlas ([`rebased`]), its full nodes 1.3 roughness cells from the
     /// boundary's α: the fixture's media (σt′R 10–23, α′ 0.87–0.95) keep it, their error from
