@@ -1034,11 +1034,11 @@ fn the_medium_of_the_soap_renders() {
 /// so the lobe's height is not seen and the joint fit reads η 2.67). From that start the first
 /// stage ran η and α to their range's walls (2.48, 0.594) with residuals 1.20 of the noise, σs′
 /// +200% against a stated ± 20% (before 2026-12-07, later: said by the edge note only); from the
-/// second start at η 1.5 it reaches a lower cost. Measured (15 mm held out): the restart's note;
-/// σa −7.6, −8.9, −10.3%, σs′ +29.7, +27.7, +26.0% (± 23–24%), η 1.732 ± 0.123; every error
-/// within 1.24 of its std; residuals 1.05 of the noise (docs/medium.md, "A second start where the
-/// first ends at the walls"). Asserted: the note, no edge note, every error within 2 of its std,
-/// σa within 15% and η within 0.2 of the truth.
+/// second start at η 1.5 it reaches a lower cost. Measured (15 mm held out, the rough level
+/// refitted): the restart's note; σa −6.5, −8.0, −9.9%, σs′ +28.1, +26.7, +25.7% (± 23–24%),
+/// η 1.737 ± 0.122; every error within 1.18 of its std; residuals 1.05 of the noise
+/// (docs/medium.md, "A second start where the first ends at the walls"). Asserted: the note, no
+/// edge note, every error within 2 of its std, σa within 15% and η within 0.2 of the truth.
 #[test]
 fn a_first_start_at_the_walls_is_started_again() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-range/thin-dark");
@@ -1704,56 +1704,117 @@ fn the_medium_is_refused_with_the_papers_method() {
     assert!(!dir.path().join("fit.json").exists());
 }
 
-/// The rough boundary's level, run by hand (about 1 min): the photon tally with the renders' GGX
-/// boundary over the model entering through it without its loss, θ 0–60°, over roughness,
-/// index, albedo and size; the least-squares fit of 1 − α^{3/2} (c₀ + c₁ s + c₂ (η − 1.45)),
-/// s = √(1 − α′), which `model::boundary::ROUGH_LEVEL` holds. Measured (2026-12-04): up to
-/// 0.229 off uncorrected, 0.029 with the fit (rms 0.010).
+/// The rough boundary's level and the exit law's tilt, run by hand (about 3 min): the photon
+/// tally with the renders' GGX boundary against the model entering through it, over 324 spheres
+/// (radius and σt 15 mm and 0.5, 25 and 1, 35 and 3 /mm; η 1.3, 1.45, 1.6; α 0.05, 0.1, 0.15,
+/// 0.25; albedo 0.6–0.995), 400 000 photons each. With s = √(1 − α′):
+/// - the level: the tally over the model without its loss, θ 0–60°, fitted by least squares as
+///   1 − α^{3/2} (c₀ + c₁ s + c₂ s² + c₃ (η − 1.45) + c₄ s (η − 1.45)), which
+///   `model::boundary::ROUGH_LEVEL` holds;
+/// - the tilt: per sphere the slope K of the tally's law over T(μ)/(π c), θ 0–80°, μ 0.2–1
+///   (r = A (1 + K (μ̄ − μ)), weighted by μ), then K = s (k₀ + k₁ s + k₂ (η − 1.45) +
+///   k₃ (α − 0.1)) by least squares, against `model::boundary::EXIT_TILT`'s constant (the
+///   fitted law, tried in the fit, is not applied: docs/medium.md, "The rough level and the
+///   exit's tilt over the issue's range").
+///
+/// Measured (2026-12-07): the level within 2.3% (rms 0.7%), where the earlier fit (albedo
+/// 0.9–0.995, linear in s, held below) was 11.5% off at albedo 0.6; the tilt rms 0.018 about
+/// slopes of 0.01–0.34, where the constant 0.11 leaves 0.085.
 #[test]
-#[ignore = "by hand: cargo test --release --test it -- --ignored medium::rough_level_against_the_photon_tally --nocapture"]
-fn rough_level_against_the_photon_tally() {
+#[ignore = "by hand: cargo test --release --test it -- --ignored medium::rough_level_and_exit_tilt_against_the_photon_tally --nocapture"]
+fn rough_level_and_exit_tilt_against_the_photon_tally() {
     use nalgebra::{DMatrix, DVector};
+    use workbench::model::boundary::{EXIT_TILT, ROUGH_LEVEL};
     let mut rows = vec![];
-    for (radius, sigma_t) in [(15.0, 0.5), (25.0, 1.0), (35.0, 2.0)] {
-        for eta in [1.35, 1.5, 1.62] {
-            for albedo in [0.9, 0.97, 0.995] {
-                for alpha in [0.05, 0.1, 0.15, 0.25] {
-                    let t = tally((radius, sigma_t, albedo, eta, alpha), 400_000, 17);
+    for (radius, sigma_t) in [(15.0, 0.5), (25.0, 1.0), (35.0, 3.0)] {
+        for eta in [1.3, 1.45, 1.6] {
+            for alpha in [0.05, 0.1, 0.15, 0.25] {
+                for albedo in [0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.97, 0.99, 0.995] {
+                    let t = tally((radius, sigma_t, albedo, eta, alpha), 400_000, 31);
                     let m = Medium::isotropic(sigma_t, albedo, eta);
                     let b = Boundary::rough(eta, alpha);
                     let model = SphereDiffusion::through(&m, radius, &b);
                     // The model without its loss of level.
-                    let ratio = t.exitance(0, 60).value / band_mean(&model, 0, 60)
+                    let level = t.exitance(0, 60).value / band_mean(&model, 0, 60)
                         * b.level(m.reduced_albedo());
                     let s = (1.0 - m.reduced_albedo()).sqrt();
-                    let a = alpha.powf(1.5);
-                    rows.push(([a, a * s, a * (eta - 1.45)], ratio));
+                    rows.push((s, eta, alpha, level, law_slope(&t.angular(0, 80), &b)));
                 }
             }
         }
     }
-    let x = DMatrix::from_fn(rows.len(), 3, |i, j| rows[i].0[j]);
-    let y = DVector::from_fn(rows.len(), |i, _| 1.0 - rows[i].1);
-    let c = x.svd(true, true).solve(&y, 1e-12).unwrap();
-    let worst = |c: &[f64]| {
+    let least_squares =
+        |x: DMatrix<f64>, y: DVector<f64>| x.clone().svd(true, true).solve(&y, 1e-12).unwrap();
+    // The level's terms, over α^{3/2}.
+    let terms = |s: f64, eta: f64| [1.0, s, s * s, eta - 1.45, s * (eta - 1.45)];
+    let n = rows.len();
+    let x = DMatrix::from_fn(n, 5, |i, j| {
+        let (s, eta, alpha, ..) = rows[i];
+        alpha.powf(1.5) * terms(s, eta)[j]
+    });
+    let c = least_squares(x, DVector::from_fn(n, |i, _| 1.0 - rows[i].3));
+    let level_off = |c: &[f64]| {
         rows.iter()
-            .map(|(t, r)| {
-                (r / (1.0 - t.iter().zip(c).map(|(t, c)| t * c).sum::<f64>()) - 1.0).abs()
+            .map(|&(s, eta, alpha, l, _)| {
+                let fit: f64 = terms(s, eta).iter().zip(c).map(|(t, c)| t * c).sum();
+                (l / (1.0 - alpha.powf(1.5) * fit) - 1.0).abs()
             })
             .fold(0.0, f64::max)
     };
-    let raw = rows
-        .iter()
-        .map(|(_, r)| (r - 1.0).abs())
-        .fold(0.0, f64::max);
     println!(
-        "ROUGH_LEVEL = {:?}: uncorrected at most {raw:.4}, fitted {:.4}, committed {:.4}",
+        "ROUGH_LEVEL = {:?}: fitted within {:.4}, committed {:.4}; uncorrected at most {:.4}",
         c.iter()
             .map(|v| (v * 1e5).round() / 1e5)
             .collect::<Vec<_>>(),
-        worst(c.as_slice()),
-        worst(&workbench::model::boundary::ROUGH_LEVEL)
+        level_off(c.as_slice()),
+        level_off(&ROUGH_LEVEL),
+        rows.iter().map(|r| (r.3 - 1.0).abs()).fold(0.0, f64::max)
     );
+    let x = DMatrix::from_fn(n, 4, |i, j| {
+        let (s, eta, alpha, ..) = rows[i];
+        s * [1.0, s, eta - 1.45, alpha - 0.1][j]
+    });
+    let k = least_squares(x.clone(), DVector::from_fn(n, |i, _| rows[i].4));
+    let rms = |fit: &dyn Fn(usize) -> f64| {
+        ((0..n).map(|i| (rows[i].4 - fit(i)).powi(2)).sum::<f64>() / n as f64).sqrt()
+    };
+    let fitted = &x * &k;
+    println!(
+        "tilt K = s (k₀ + k₁ s + k₂ (η − 1.45) + k₃ (α − 0.1)), k = {:?}: rms {:.4} about the slopes; EXIT_TILT's constant {EXIT_TILT} {:.4}",
+        k.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>(),
+        rms(&|i| fitted[i]),
+        rms(&|_| EXIT_TILT)
+    );
+}
+
+/// The slope K of a tally's angular law (per μ bin, [`workbench::synth::photon_tally::Tally::angular`])
+/// over the untilted T(μ)/(π c): r = A (1 + K (μ̄ − μ)) by weighted least squares over μ 0.2–1
+/// (weights μ), μ̄ the boundary's exit-weighted mean cosine.
+fn law_slope(law: &[f64], b: &Boundary) -> f64 {
+    let bins = law.len();
+    // μ̄ = ∫ T 2μ² dμ / ∫ T 2μ dμ, by the midpoint rule.
+    let (mut num, mut den) = (0.0, 0.0);
+    for k in 0..2000 {
+        let mu = (k as f64 + 0.5) / 2000.0;
+        let t = b.transmission(mu) * 2.0 * mu;
+        num += t * mu;
+        den += t;
+    }
+    let mean = num / den;
+    let (mut s00, mut s01, mut s11, mut y0, mut y1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (k, l) in law.iter().enumerate().skip(bins / 5) {
+        let mu = (k as f64 + 0.5) / bins as f64;
+        let r = l / (b.transmission(mu) / (std::f64::consts::PI * b.hemispherical()));
+        let x = mean - mu;
+        s00 += mu;
+        s01 += mu * x;
+        s11 += mu * x * x;
+        y0 += mu * r;
+        y1 += mu * r * x;
+    }
+    let det = s00 * s11 - s01 * s01;
+    let (a, slope) = ((y0 * s11 - y1 * s01) / det, (s00 * y1 - s01 * y0) / det);
+    slope / a
 }
 
 /// The tally's first azimuthal harmonic b (L ∝ 1 + b cos ψ, ψ from the direction away from the
