@@ -56,6 +56,48 @@ pub(crate) fn eta_from_highlight(
     eta_systematic
 }
 
+/// With the irradiance given, the highlight's height measures F(η) through the lobe's peak; where
+/// the peak is clipped only its wings are left, whose height goes as F(η) α², and η trades with α
+/// further than the fit's own error and the highlight-alone check (which frees α too) say: on
+/// the thin, dark corner of the range (`datasets/pbr-range/thin-dark`, 253 pixels
+/// clipped on its 35 mm sphere) the joint fit's η is 2.67 ± 0.30 against the truth's 1.6, its α
+/// 0.042 against the detector's lobe fits' 0.093 ± 0.011. So where α disagrees with the
+/// detector's ([`alpha_from_detector`] returned a difference), η is fitted again on the
+/// highlight's pixels with α held at the detector's, and the difference joins η's error as a
+/// systematic, with a note (docs/uncertainty.md, "η with the detector's α").
+pub(crate) fn eta_at_detector_alpha(
+    setup: &Setup,
+    pooled: &Pooled,
+    fit: &Fit,
+    alpha_apart: f64,
+    notes: &mut Vec<String>,
+) -> f64 {
+    let Some(detected) = setup.measured.alpha else {
+        return 0.0;
+    };
+    if alpha_apart <= 0.0
+        || setup.settings.irradiance.is_none()
+        || !fit.free[idx::ETA]
+        || pooled.kept.len() <= 8
+    {
+        return 0.0;
+    }
+    let mut free = [false; N_PARAMS];
+    free[idx::ETA] = true;
+    let mut start = fit.params;
+    start.material.specular.alpha = detected;
+    let kept = solver::less_floor(&pooled.kept, fit.floor_value());
+    let at = solver::fit(setup.model(), &kept, &start, free, &[]);
+    let (a, b) = (at.params.material.eta, fit.params.material.eta);
+    if !at.converged || !a.is_finite() {
+        return 0.0;
+    }
+    notes.push(format!(
+        "η = {b:.4} from the joint fit, {a:.4} on the highlight with α held at the detector's {detected:.4}: η trades with α where the lobe's peak is not seen (clipped, or faint), so the difference joins η's std"
+    ));
+    (a - b).abs()
+}
+
 /// How many of their combined errors the joint fit's α and the detector's may lie apart before
 /// the difference joins α's error. Two, not three: the joint fit's own error is typically a
 /// tenth of the detector's, so a disagreement of 2–3 combined errors is many of its own

@@ -4,7 +4,9 @@
 //! not determine held ([`super::identify`]); the phases before and the checks after come from the
 //! folder's other files.
 
-use super::checks::{self, alpha_from_detector, eta_from_highlight, fit_notes};
+use super::checks::{
+    self, alpha_from_detector, eta_at_detector_alpha, eta_from_highlight, fit_notes,
+};
 use super::identify::{
     degenerate_check, hold, parameter_set, poorly_determined, prior_tension, resolution_notes,
     Round,
@@ -236,6 +238,8 @@ pub fn fit_joint(setup: &Setup, spheres: &[&SphereData]) -> JointFit {
     let mut systematic = [0.0; N_PARAMS];
     systematic[idx::ETA] = eta_from_highlight(setup, &pooled, specular, &fit, &mut notes);
     systematic[idx::ALPHA] = alpha_from_detector(&setup.measured, specular, &fit, &mut notes);
+    let traded = eta_at_detector_alpha(setup, &pooled, &fit, systematic[idx::ALPHA], &mut notes);
+    systematic[idx::ETA] = systematic[idx::ETA].hypot(traded);
     laps.lap("joint stage");
     each_once(&mut notes);
     let mut jf = JointFit {
