@@ -210,8 +210,8 @@ fn reduction_skips(jf: &JointFit) -> Vec<String> {
 
 /// Each parameter's stated standard error (docs/uncertainty.md): the larger of the formal error
 /// and the jackknife's spread, scaled by its prior's tension, with the light's systematic in
-/// quadrature, and the disagreement between two measurements of it (η with the highlight alone,
-/// α with the detector's lobe fits; [`JointFit::systematic`]).
+/// quadrature, and the disagreement between two measurements of it (η with the highlight alone
+/// and with α at the detector's, α with the detector's lobe fits; [`JointFit::systematic`]).
 fn stated_std(
     jf: &JointFit,
     jack: Option<&Jackknife>,

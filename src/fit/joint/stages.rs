@@ -73,8 +73,9 @@ pub struct JointFit {
     pub prior_tension: [f64; N_PARAMS],
     /// Per parameter, the disagreement between two measurements of it when it is beyond their
     /// errors (0 otherwise): η from the whole fit and from the highlight alone (only with the
-    /// irradiance given), α from the whole fit and from the detector's lobe fits. Joins the
-    /// parameter's stated error in quadrature.
+    /// irradiance given), and from the highlight with α held at the detector's where the two
+    /// α disagree (in quadrature with the first), α from the whole fit and from the detector's
+    /// lobe fits. Joins the parameter's stated error in quadrature.
     pub systematic: [f64; N_PARAMS],
     /// χ²/dof against the measured noise: (residual / noise)² per observation row.
     pub chi2_dof: f64,
