@@ -30,7 +30,6 @@ pub(crate) fn eta_from_highlight(
     fit: &Fit,
     notes: &mut Vec<String>,
 ) -> f64 {
-    let model = setup.model();
     let mut eta_systematic = 0.0;
     if setup.settings.irradiance.is_some()
         && specular
@@ -40,8 +39,7 @@ pub(crate) fn eta_from_highlight(
         let mut hl_free = [false; N_PARAMS];
         hl_free[idx::ETA] = true;
         hl_free[idx::ALPHA] = fit.free[idx::ALPHA];
-        let kept = solver::less_floor(&pooled.kept, fit.floor_value());
-        let hl = solver::fit(model, &kept, &fit.params, hl_free, &[]);
+        let hl = on_highlight(setup, pooled, fit, &fit.params, hl_free);
         let (a, b) = (hl.params.material.eta, fit.params.material.eta);
         let combined = (hl.std[idx::ETA].powi(2) + fit.std[idx::ETA].powi(2)).sqrt();
         if hl.converged && combined > 0.0 && (a - b).abs() > 3.0 * combined {
@@ -60,8 +58,9 @@ pub(crate) fn eta_from_highlight(
 /// the peak is clipped only its wings are left, whose height goes as F(η) α², and η trades with α
 /// further than the fit's own error and the highlight-alone check (which frees α too) say: on
 /// the thin, dark corner of the range (`datasets/pbr-range/thin-dark`, 253 pixels
-/// clipped on its 35 mm sphere) the joint fit's η is 2.67 ± 0.30 against the truth's 1.6, its α
-/// 0.042 against the detector's lobe fits' 0.093 ± 0.011. So where α disagrees with the
+/// clipped on its 35 mm sphere) the joint fit's η was stated 2.67 ± 0.30 against the truth's
+/// 1.6, its α 0.042 against the detector's lobe fits' 0.093 ± 0.011 (with α held there the
+/// highlight says 1.50; η is now stated ± 1.00). So where α disagrees with the
 /// detector's ([`alpha_from_detector`] returned a difference), η is fitted again on the
 /// highlight's pixels with α held at the detector's, and the difference joins η's error as a
 /// systematic, with a note (docs/uncertainty.md, "η with the detector's α").
@@ -86,8 +85,7 @@ pub(crate) fn eta_at_detector_alpha(
     free[idx::ETA] = true;
     let mut start = fit.params;
     start.material.specular.alpha = detected;
-    let kept = solver::less_floor(&pooled.kept, fit.floor_value());
-    let at = solver::fit(setup.model(), &kept, &start, free, &[]);
+    let at = on_highlight(setup, pooled, fit, &start, free);
     let (a, b) = (at.params.material.eta, fit.params.material.eta);
     if !at.converged || !a.is_finite() {
         return 0.0;
@@ -96,6 +94,19 @@ pub(crate) fn eta_at_detector_alpha(
         "η = {b:.4} from the joint fit, {a:.4} on the highlight with α held at the detector's {detected:.4}: η trades with α where the lobe's peak is not seen (clipped, or faint), so the difference joins η's std"
     ));
     (a - b).abs()
+}
+
+/// The highlight's pixels (the pooled ones kept unpooled, the fit's dark floor taken off) fitted
+/// from `start` with `free` free, the rest held: the refits η's checks compare with the fit.
+fn on_highlight(
+    setup: &Setup,
+    pooled: &Pooled,
+    fit: &Fit,
+    start: &crate::model::Params,
+    free: [bool; N_PARAMS],
+) -> Fit {
+    let kept = solver::less_floor(&pooled.kept, fit.floor_value());
+    solver::fit(setup.model(), &kept, start, free, &[])
 }
 
 /// How many of their combined errors the joint fit's α and the detector's may lie apart before
