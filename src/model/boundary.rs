@@ -145,6 +145,11 @@ impl Boundary {
         self.hemispherical
     }
 
+    /// μ̄ = ∫₀¹ T(μ) 2μ² dμ / c: the exit-weighted mean cosine the law's tilt turns about.
+    pub fn mean_cosine(&self) -> f64 {
+        self.mean_cosine
+    }
+
     /// The factor the rough boundary's losses put on the exitance of a medium of reduced albedo
     /// `reduced_albedo` ([`ROUGH_LEVEL`]; 1 when smooth). Outside the range it was fitted on it
     /// is held at the range's edge.

@@ -1793,15 +1793,7 @@ fn rough_level_and_exit_tilt_against_the_photon_tally() {
 /// (weights μ), μ̄ the boundary's exit-weighted mean cosine.
 fn law_slope(law: &[f64], b: &Boundary) -> f64 {
     let bins = law.len();
-    // μ̄ = ∫ T 2μ² dμ / ∫ T 2μ dμ, by the midpoint rule.
-    let (mut num, mut den) = (0.0, 0.0);
-    for k in 0..2000 {
-        let mu = (k as f64 + 0.5) / 2000.0;
-        let t = b.transmission(mu) * 2.0 * mu;
-        num += t * mu;
-        den += t;
-    }
-    let mean = num / den;
+    let mean = b.mean_cosine();
     let (mut s00, mut s01, mut s11, mut y0, mut y1) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (k, l) in law.iter().enumerate().skip(bins / 5) {
         let mu = (k as f64 + 0.5) / bins as f64;

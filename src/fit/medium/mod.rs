@@ -411,10 +411,9 @@ fn first_stage<'a>(
     }
 }
 
-/// Each channel's diffusion length 1/σtr (mm), σtr = √(3 σa σt′): what [`start`] takes as the
-/// joint fit's σ0.
+/// Each channel's diffusion length 1/σtr (mm): what [`start`] takes as the joint fit's σ0.
 fn diffusion_lengths(media: &[Medium; 3]) -> [f64; 3] {
-    media.map(|m| 1.0 / (3.0 * m.sigma_a * m.sigma_t_reduced()).sqrt())
+    media.map(|m| 1.0 / m.sigma_tr())
 }
 
 /// The free atlas's M is exact at its full nodes' roughness and within 4.6e-3 half a cell from
