@@ -10,6 +10,7 @@ pub mod entry;
 pub mod fresnel;
 pub mod lanes;
 pub mod mixture;
+pub mod normalized_diffusion;
 pub mod quadrature;
 mod radiance;
 pub mod specular;
