@@ -10,7 +10,7 @@
 # the photos).
 # Usage: scripts/medium-sessions.sh [path/to/workbench] [scratch dir] [session names…] (the eleven
 # by default; the four corners of datasets/pbr-range by name: dense-dark dense-white thin-dark
-# thin-white)
+# thin-white). IRRADIANCE_SCALE=<factor> passes the truth's irradiance times that factor.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 source scripts/lib/pbr-sessions.sh
@@ -19,7 +19,7 @@ for s in "${sessions[@]}"; do
   d="$out/$s"
   rm -f "$d.fit.json"
   copy_session "$s" "$d"
-  e=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['irradiance_in_png_units'])" "$d/truth.json")
+  e=$(python3 -c "import json,sys; print(float(sys.argv[2]) * json.load(open(sys.argv[1]))['irradiance_in_png_units'])" "$d/truth.json" "${IRRADIANCE_SCALE:-1}")
   "$wb" --quiet solve "$d" --model medium --irradiance "$e" --holdout 15 --out "$d.fit.json" >"$d.log" 2>&1
   python3 - "$d.fit.json" "$d/truth.json" "$s" <<'PY'
 import json, sys

@@ -2080,13 +2080,22 @@ fn truth_outlines(dir: &Path) {
             .iter()
             .find(|i| i["file"] == file.as_str())
             .expect("the photo in truth.json");
-        let c = Vector3::from_fn(|i, _| truth["centre_mm"][i].as_f64().unwrap());
-        let s = &mut im["spheres"][0];
-        let r = s["radius_mm"].as_f64().unwrap();
-        let axis = c.normalize();
-        s["outline"]["axis"] = serde_json::json!([axis.x, axis.y, axis.z]);
-        s["outline"]["half_angle_deg"] = serde_json::json!((r / c.norm()).asin().to_degrees());
-        s["center_mm"] = serde_json::json!([c.x, c.y, c.z]);
+        for s in im["spheres"].as_array_mut().unwrap() {
+            let r = s["radius_mm"].as_f64().unwrap();
+            // `synth pbr`'s truth.json gives one centre a photo; pbr-jade's a list of spheres.
+            let centre = match truth["spheres"].as_array() {
+                Some(list) => {
+                    let same = |t: &&serde_json::Value| t["radius_mm"].as_f64() == Some(r);
+                    &list.iter().find(same).expect("the sphere in truth.json")["centre_mm"]
+                }
+                None => &truth["centre_mm"],
+            };
+            let c = Vector3::from_fn(|i, _| centre[i].as_f64().unwrap());
+            let axis = c.normalize();
+            s["outline"]["axis"] = serde_json::json!([axis.x, axis.y, axis.z]);
+            s["outline"]["half_angle_deg"] = serde_json::json!((r / c.norm()).asin().to_degrees());
+            s["center_mm"] = serde_json::json!([c.x, c.y, c.z]);
+        }
     }
     std::fs::write(
         dir.join("detections.json"),
@@ -2097,7 +2106,8 @@ fn truth_outlines(dir: &Path) {
 
 /// The photos over the medium fit's model at the truth (its medium, η, roughness, light and
 /// irradiance), per band of θ past the lit side, every sphere and channel of a physically based
-/// session (`SESSION`, default `pbr-wax`; `datasets/` or `datasets/pbr-seeds/`), every pixel off
+/// session (`SESSION`, default `pbr-wax`; `datasets/`, `datasets/pbr-seeds/`, `datasets/pbr-range/`
+/// or ../shared/data/, e.g. `pbr-jade`), every pixel off
 /// the highlight and the rim, so past the fit's θ limit too. The table of docs/medium.md, "The
 /// deepest shadow fitted"; by hand (about 10 s):
 /// `cargo test --release --test it -- --ignored medium::the_renders_over_the_model_at_the_truth --nocapture`.
@@ -2113,6 +2123,7 @@ fn the_renders_over_the_model_at_the_truth() {
         root.join("pbr-range").join(&name),
     ]
     .into_iter()
+    .chain(common::shared_data().map(|s| s.join(&name)))
     .find(|p| p.join("truth.json").exists())
     .expect("a session with truth.json");
     let dir = common::session_copy(&src);
@@ -2395,7 +2406,7 @@ fn the_outline_sensitivity_follows_refits() {
 }
 
 /// The medium fit given the truth's inputs (by hand, about 10 s): a session of
-/// `datasets/pbr-seeds` (`SESSION`, default jade-6) with every outline where truth.json puts it,
+/// `datasets/pbr-seeds`, `datasets/pbr-range` or ../shared/data (`SESSION`, default jade-6) with every outline where truth.json puts it,
 /// the truth's light, irradiance and roughness, η's prior the truth's ± 0.02, and the 20–35 mm
 /// spheres, from three starts (the truth itself, the start from the truth's diffusion length, the
 /// start from the joint fit's σ0 of jade-6). `ETA=1.405:0.069` replaces η's prior by the joint
@@ -2413,17 +2424,19 @@ fn the_fit_from_the_truths_inputs() {
     let src = ["pbr-seeds", "pbr-range"]
         .iter()
         .map(|d| root.join(d).join(&name))
+        .chain(common::shared_data().map(|s| s.join(&name)))
         .find(|p| p.join("truth.json").exists())
-        .expect("a session of datasets/pbr-seeds or datasets/pbr-range");
+        .expect("a session of datasets/pbr-seeds, datasets/pbr-range or ../shared/data");
     let dir = common::session_copy(&src);
     load_quiet(dir.path());
     truth_outlines(dir.path());
     let t = truth(dir.path());
     let loaded = load_quiet(dir.path());
+    // pbr-jade's row.png is left out: its spheres light each other's dark sides.
     let spheres: Vec<_> = loaded
         .spheres
         .iter()
-        .filter(|s| s.radius_mm > 16.0)
+        .filter(|s| s.radius_mm > 16.0 && s.image != "row.png")
         .collect();
     // ALPHA=value holds α there; ALPHA=value:std makes it the prior of α the fit measures.
     let alpha = std::env::var("ALPHA").map_or((t.alpha, None), |v| match v.split_once(':') {
@@ -2439,7 +2452,12 @@ fn the_fit_from_the_truths_inputs() {
         eta_alpha_slope: 0.0,
         alpha: alpha.0,
         alpha_std: alpha.1,
-        irradiance: Some(t.irradiance),
+        // IRRADIANCE_SCALE=0.945: the truth's irradiance times that (pbr-jade's photos are
+        // 5–7% darker than its truth renders, docs/pbr.md).
+        irradiance: Some(
+            t.irradiance
+                * std::env::var("IRRADIANCE_SCALE").map_or(1.0, |v| v.parse::<f64>().unwrap()),
+        ),
         largest_radius: 35.0,
     };
     let radii = pixels(&spheres, &t.light);
