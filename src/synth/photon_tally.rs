@@ -60,7 +60,7 @@ pub struct Tally {
     pub photons: u64,
     /// Σw per θ bin and μ bin, per batch.
     batches: Vec<Vec<f64>>,
-    /// Σw of photons that scattered exactly once, per θ bin.
+    /// Σw of photons that scattered exactly once, per θ bin and μ bin.
     pub single: Vec<f64>,
     /// Σw cos ψ per (θ bin, μ bin): ψ the exit direction's azimuth around the normal from the
     /// surface's direction away from the light (increasing θ).
@@ -106,22 +106,23 @@ impl Tally {
     pub fn single_exitance(&self, lo: usize, hi: usize) -> f64 {
         let w = Self::bin_width();
         let area = Self::band_area(lo as f64 * w, hi as f64 * w);
-        self.single[lo..hi].iter().sum::<f64>() / (2.0 * self.photons as f64 * area)
+        self.single[lo * MU_BINS..hi * MU_BINS].iter().sum::<f64>()
+            / (2.0 * self.photons as f64 * area)
+    }
+
+    /// The angular law, as [`Tally::angular`], of the light that scattered more than once.
+    pub fn multiple_angular(&self, lo: usize, hi: usize) -> Vec<f64> {
+        let all = self.sum(lo, hi);
+        let multiple: Vec<f64> = (0..MU_BINS)
+            .map(|k| all[k] - (lo..hi).map(|t| self.single[t * MU_BINS + k]).sum::<f64>())
+            .collect();
+        per_projected_solid_angle(&multiple)
     }
 
     /// The radiance's angular law over the θ bins [lo, hi): per μ bin, L(μ)/M, i.e. the radiance
     /// per unit exitance (a Lambertian emitter gives 1/π in every bin).
     pub fn angular(&self, lo: usize, hi: usize) -> Vec<f64> {
-        let total: f64 = self.sum(lo, hi).iter().sum();
-        self.sum(lo, hi)
-            .iter()
-            .enumerate()
-            .map(|(k, s)| {
-                let (m0, m1) = (k as f64 / MU_BINS as f64, (k + 1) as f64 / MU_BINS as f64);
-                // Power per projected solid angle: ∫ μ dΩ over the bin = π (μ₁² − μ₀²).
-                s / total / (PI * (m1 * m1 - m0 * m0))
-            })
-            .collect()
+        per_projected_solid_angle(&self.sum(lo, hi))
     }
 
     fn sum(&self, lo: usize, hi: usize) -> Vec<f64> {
@@ -158,6 +159,20 @@ impl Tally {
     }
 }
 
+/// Weights per μ bin as radiance per unit exitance: each bin's share of the whole over its
+/// projected solid angle, ∫ μ dΩ = π (μ₁² − μ₀²).
+fn per_projected_solid_angle(weights: &[f64]) -> Vec<f64> {
+    let total: f64 = weights.iter().sum();
+    weights
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let (m0, m1) = (k as f64 / MU_BINS as f64, (k + 1) as f64 / MU_BINS as f64);
+            s / total / (PI * (m1 * m1 - m0 * m0))
+        })
+        .collect()
+}
+
 fn mean_and_error(values: &[f64]) -> Estimate {
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
@@ -178,7 +193,7 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
         .map(|b| {
             let mut rng = super::row_rng(seed, 0x7a11, b as u64);
             let mut bins = vec![0.0; THETA_BINS * MU_BINS];
-            let mut single = vec![0.0; THETA_BINS];
+            let mut single = vec![0.0; THETA_BINS * MU_BINS];
             let mut azimuthal = vec![0.0; THETA_BINS * MU_BINS];
             let (mut entered, mut lost) = (0.0, 0.0);
             for _ in 0..per_batch {
@@ -192,7 +207,7 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
                         bins[theta_bin * MU_BINS + mu_bin] += walk.left;
                         azimuthal[theta_bin * MU_BINS + mu_bin] += walk.left * cos_psi;
                         if events == 1 {
-                            single[theta_bin] += walk.left;
+                            single[theta_bin * MU_BINS + mu_bin] += walk.left;
                         }
                     }
                 }
@@ -200,7 +215,7 @@ pub fn trace(scene: &TallyScene, photons: u64, seed: u64) -> Tally {
             (bins, single, azimuthal, entered, lost)
         })
         .collect();
-    let mut single = vec![0.0; THETA_BINS];
+    let mut single = vec![0.0; THETA_BINS * MU_BINS];
     let mut azimuthal = vec![0.0; THETA_BINS * MU_BINS];
     let (mut entered, mut lost) = (0.0, 0.0);
     let mut batches = Vec::with_capacity(BATCHES);

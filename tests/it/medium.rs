@@ -1922,6 +1922,86 @@ fn rough_level_and_exit_tilt_against_the_photon_tally() {
     );
 }
 
+/// The exit law's tilt without the light that scattered once, in the photon tally (by hand,
+/// about 30 s): over radius and σt 15 mm and 0.5, 25 and 1, 35 and 3 /mm, η 1.3, 1.45 and 1.6,
+/// a smooth boundary and GGX α 0.05, 0.1 and 0.25, albedo 0.6–0.995, the slope K of the whole
+/// law and of the multiply scattered light's (θ 0–80°), the once-scattered share of the
+/// exitance, and on the smooth spheres that share at θ 0–20° against the flat medium's single
+/// scattering, E α μ₀ T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)) (μ′ the refracted cosines), integrated
+/// over the exits. The table of docs/medium.md, "Single scattering and the exit's tilt".
+#[test]
+#[ignore = "by hand: cargo test --release --test it -- --ignored medium::exit_tilt_without_single_scattering --nocapture"]
+fn exit_tilt_without_single_scattering() {
+    use workbench::model::fresnel::transmission;
+    let mut rows = vec![];
+    for (radius, sigma_t) in [(15.0, 0.5), (25.0, 1.0), (35.0, 3.0)] {
+        for eta in [1.3, 1.45, 1.6] {
+            for alpha in [0.0, 0.05, 0.1, 0.25] {
+                for albedo in [0.6, 0.7, 0.8, 0.9, 0.97, 0.995] {
+                    let t = tally((radius, sigma_t, albedo, eta, alpha), 400_000, 37);
+                    let b = Boundary::rough(eta, alpha);
+                    let (whole, multiple) = (
+                        law_slope(&t.angular(0, 80), &b),
+                        law_slope(&t.multiple_angular(0, 80), &b),
+                    );
+                    let share = t.single_exitance(0, 80) / t.exitance(0, 80).value;
+                    let (measured, flat) = if alpha == 0.0 {
+                        let inside = |mu: f64| (1.0 - (1.0 - mu * mu) / (eta * eta)).sqrt();
+                        let once = |mu0: f64| {
+                            (0..64)
+                                .map(|k| {
+                                    let mu = (k as f64 + 0.5) / 64.0;
+                                    albedo * mu0 * transmission(mu0, eta) * transmission(mu, eta)
+                                        / (4.0 * std::f64::consts::PI * eta * eta)
+                                        / (inside(mu0) + inside(mu))
+                                        * 2.0
+                                        * std::f64::consts::PI
+                                        * mu
+                                        / 64.0
+                                })
+                                .sum::<f64>()
+                        };
+                        (t.single_exitance(0, 20), band_mean_of(once, 0, 20))
+                    } else {
+                        (f64::NAN, f64::NAN)
+                    };
+                    println!(
+                        "R {radius:4} σt {sigma_t:3} η {eta:4} α {alpha:4} albedo {albedo:5}: K {whole:6.3}, multiple {multiple:6.3}; once-scattered share {share:.3}; θ 0–20° once {measured:.4} flat {flat:.4}"
+                    );
+                    rows.push((albedo, eta, alpha, whole, multiple, share, measured / flat));
+                }
+            }
+        }
+    }
+    for albedo in [0.6, 0.7, 0.8, 0.9, 0.97, 0.995] {
+        let of = |pick: &dyn Fn(&(f64, f64, f64, f64, f64, f64, f64)) -> f64| {
+            let v: Vec<f64> = rows
+                .iter()
+                .filter(|r| r.0 == albedo)
+                .map(pick)
+                .filter(|v| v.is_finite())
+                .collect();
+            let lo = v.iter().copied().fold(f64::MAX, f64::min);
+            let hi = v.iter().copied().fold(f64::MIN, f64::max);
+            format!("{lo:.3}–{hi:.3}")
+        };
+        println!(
+            "albedo {albedo}: K {}, multiple {}; once-scattered share {}; once over the flat medium's (smooth, θ 0–20°) {}",
+            of(&|r| r.3),
+            of(&|r| r.4),
+            of(&|r| r.5),
+            of(&|r| r.6)
+        );
+    }
+    let rms = |pick: &dyn Fn(&(f64, f64, f64, f64, f64, f64, f64)) -> f64| {
+        let k: Vec<f64> = rows.iter().map(pick).collect();
+        let mean = k.iter().sum::<f64>() / k.len() as f64;
+        let sd = (k.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / k.len() as f64).sqrt();
+        format!("mean {mean:.3}, rms about it {sd:.3}")
+    };
+    println!("K: whole {}; multiple {}", rms(&|r| r.3), rms(&|r| r.4));
+}
+
 /// The slope K of a tally's angular law (per μ bin, [`workbench::synth::photon_tally::Tally::angular`])
 /// over the untilted T(μ)/(π c): r = A (1 + K (μ̄ − μ)) by weighted least squares over μ 0.2–1
 /// (weights μ), μ̄ the boundary's exit-weighted mean cosine.
