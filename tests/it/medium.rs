@@ -1968,16 +1968,22 @@ fn exit_tilt_without_single_scattering() {
                     println!(
                         "R {radius:4} σt {sigma_t:3} η {eta:4} α {alpha:4} albedo {albedo:5}: K {whole:6.3}, multiple {multiple:6.3}; once-scattered share {share:.3}; θ 0–20° once {measured:.4} flat {flat:.4}"
                     );
-                    rows.push((albedo, eta, alpha, whole, multiple, share, measured / flat));
+                    rows.push(TiltRow {
+                        albedo,
+                        whole,
+                        multiple,
+                        share,
+                        once_over_flat: measured / flat,
+                    });
                 }
             }
         }
     }
     for albedo in [0.6, 0.7, 0.8, 0.9, 0.97, 0.995] {
-        let of = |pick: &dyn Fn(&(f64, f64, f64, f64, f64, f64, f64)) -> f64| {
+        let of = |pick: &dyn Fn(&TiltRow) -> f64| {
             let v: Vec<f64> = rows
                 .iter()
-                .filter(|r| r.0 == albedo)
+                .filter(|r| r.albedo == albedo)
                 .map(pick)
                 .filter(|v| v.is_finite())
                 .collect();
@@ -1987,19 +1993,34 @@ fn exit_tilt_without_single_scattering() {
         };
         println!(
             "albedo {albedo}: K {}, multiple {}; once-scattered share {}; once over the flat medium's (smooth, θ 0–20°) {}",
-            of(&|r| r.3),
-            of(&|r| r.4),
-            of(&|r| r.5),
-            of(&|r| r.6)
+            of(&|r| r.whole),
+            of(&|r| r.multiple),
+            of(&|r| r.share),
+            of(&|r| r.once_over_flat)
         );
     }
-    let rms = |pick: &dyn Fn(&(f64, f64, f64, f64, f64, f64, f64)) -> f64| {
+    let rms = |pick: &dyn Fn(&TiltRow) -> f64| {
         let k: Vec<f64> = rows.iter().map(pick).collect();
         let mean = k.iter().sum::<f64>() / k.len() as f64;
         let sd = (k.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / k.len() as f64).sqrt();
         format!("mean {mean:.3}, rms about it {sd:.3}")
     };
-    println!("K: whole {}; multiple {}", rms(&|r| r.3), rms(&|r| r.4));
+    println!(
+        "K: whole {}; multiple {}",
+        rms(&|r| r.whole),
+        rms(&|r| r.multiple)
+    );
+}
+
+/// One sphere of [`exit_tilt_without_single_scattering`]: the whole law's slope, the multiply
+/// scattered light's, the once-scattered share of the exitance, and (smooth spheres; NaN else)
+/// the once-scattered exitance at θ 0–20° over the flat medium's formula.
+struct TiltRow {
+    albedo: f64,
+    whole: f64,
+    multiple: f64,
+    share: f64,
+    once_over_flat: f64,
 }
 
 /// The slope K of a tally's angular law (per μ bin, [`workbench::synth::photon_tally::Tally::angular`])
