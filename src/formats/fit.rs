@@ -247,6 +247,11 @@ pub struct EtaSourcesJson {
 pub struct MediumJson {
     /// The model that predicted the pixels (docs/medium.md).
     pub profile: String,
+    /// The model's prediction at a fixed reference, as the build that fitted it computed it
+    /// (`fit::medium::model_reference`): `plot` and `close-loop` draw and compare this fit's
+    /// pixels only with a build whose model gives the same. Absent in files written before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_reference: Option<Vec<f64>>,
     /// The boundary's GGX roughness, carried into exports: measured by the medium fit with
     /// the joint fit's lobe as its prior, or held at the lobe's (0: smooth).
     #[serde(deserialize_with = "nullable::f64")]

@@ -449,6 +449,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
     };
     MediumJson {
         profile: PROFILE.into(),
+        model_reference: Some(medium::model_reference()),
         alpha: f.alpha,
         alpha_std: f.alpha_std,
         alpha_lobe: f.alpha_lobe.map(value),

@@ -55,5 +55,38 @@ pub fn load_fit(fit_path: &Path, quiet: bool) -> Result<(FitFile, super::Loaded)
             ),
         ));
     }
+    same_medium_model(&fit, fit_path)?;
     Ok((fit, l))
 }
+
+/// A medium fitted with another build's model is not drawn or compared with this one's: its
+/// residuals would be against a model it was not fitted with (docs/formats.md,
+/// "model_reference").
+fn same_medium_model(fit: &FitFile, fit_path: &Path) -> Result<()> {
+    let Some(m) = &fit.medium else {
+        return Ok(());
+    };
+    let ours = crate::fit::medium::model_reference();
+    let problem = match &m.model_reference {
+        None => "its medium was fitted by a build that did not record its model".to_string(),
+        Some(theirs) => {
+            let d = crate::fit::medium::reference_difference(theirs, &ours);
+            if d <= REFERENCE_TOLERANCE {
+                return Ok(());
+            }
+            format!(
+                "its medium was fitted with another model than this build's (the model's reference radiances differ by up to {:.2e} of themselves)",
+                d
+            )
+        }
+    };
+    Err(Error::invalid(
+        fit_path,
+        format!("{problem}: solve again to draw or compare it with this build's model"),
+    ))
+}
+
+/// How far the recorded reference may be from this build's: the same model built again gives
+/// the same values within rounding (here the dev profile's build draws the release build's
+/// fit), while a 1% change of the exit law's tilt moves them by 3e-4 (docs/formats.md).
+const REFERENCE_TOLERANCE: f64 = 1e-9;

@@ -1349,6 +1349,53 @@ fn the_medium_fit_is_drawn(fit: &Path) {
         assert_eq!((png.width(), png.height()), size, "{name}");
         assert!(index.contains(&format!("src=\"{name}.png\"")), "{name}");
     }
+    another_builds_medium_is_not_drawn(fit);
+}
+
+/// A fit.json whose medium was fitted with another model (its `model_reference` a millionth off
+/// this build's, or absent as in files written before it) is not drawn: one line naming the
+/// file, a non-zero exit, and no figures.
+fn another_builds_medium_is_not_drawn(fit: &Path) {
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fit).unwrap()).unwrap();
+    let reference = v["medium"]["model_reference"].as_array().unwrap().clone();
+    assert_eq!(reference.len(), 24, "{reference:?}");
+    for (name, edit, says) in [
+        (
+            "moved.fit.json",
+            Some(1.0 + 1e-6),
+            "another model than this build's",
+        ),
+        ("unrecorded.fit.json", None, "did not record its model"),
+    ] {
+        let mut w = v.clone();
+        match edit {
+            Some(f) => {
+                w["medium"]["model_reference"][3] =
+                    serde_json::json!(reference[3].as_f64().unwrap() * f)
+            }
+            None => {
+                w["medium"]
+                    .as_object_mut()
+                    .unwrap()
+                    .remove("model_reference");
+            }
+        }
+        let path = fit.with_file_name(name);
+        std::fs::write(&path, serde_json::to_string_pretty(&w).unwrap()).unwrap();
+        let out = fit.with_file_name(format!("{name}-plots"));
+        let (code, _, err) = common::wb(&[
+            "plot",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_ne!(code, 0, "{name}");
+        let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        assert!(err.contains(name) && err.contains(says), "{err}");
+        assert!(!out.exists(), "{name}: figures written");
+    }
 }
 
 /// A jade-like render (`datasets/pbr-seeds/jade-3`: albedo 0.9, σt 2), all five radii fitted:

@@ -679,6 +679,48 @@ fn predict_physical(p: &problem::Physical, radius: &Radius) -> [Vec<f64>; 3] {
     })
 }
 
+/// This build's medium model at a fixed reference: three media (σt 1 /mm, albedo 0.7, 0.95 and
+/// 0.995, η 1.45) on a 20 mm sphere behind a GGX boundary of α 0.1 under unit irradiance, at
+/// eight pixels (θ 10, 45, 80 and 95°, each seen 10° and 60° from its normal, across the
+/// light's plane), per channel in that order. fit.json records it (`medium.model_reference`):
+/// what draws or compares a fit's pixels again with the model (`plot`, `close-loop`) checks that
+/// this build's model is the one the medium was fitted with.
+pub fn model_reference() -> Vec<f64> {
+    let media = [0.7, 0.95, 0.995].map(|albedo| Medium::isotropic(1.0, albedo, 1.45));
+    let pixels: Vec<Px> = [10.0f64, 45.0, 80.0, 95.0]
+        .iter()
+        .flat_map(|&theta| {
+            [10.0f64, 60.0].map(|phi| {
+                let (t, p) = (theta.to_radians(), phi.to_radians());
+                // n at θ from the light (along z); v at φ from n, across the light's plane.
+                let n = nalgebra::Vector3::new(t.sin(), 0.0, t.cos());
+                let v = n * p.cos() + nalgebra::Vector3::y() * p.sin();
+                Px::at(&n, &v, &nalgebra::Vector3::z(), 0.0, 1.0)
+            })
+        })
+        .collect();
+    let radius = Radius {
+        radius_mm: 20.0,
+        pixels: std::array::from_fn(|_| pixels.clone()),
+    };
+    predict_with(media, [1.0; 3], 0.1, &radius)
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// The largest relative difference between two [`model_reference`]s (infinite when their
+/// lengths differ).
+pub fn reference_difference(a: &[f64], b: &[f64]) -> f64 {
+    if a.len() != b.len() {
+        return f64::INFINITY;
+    }
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(y.abs()).max(1e-300))
+        .fold(0.0, f64::max)
+}
+
 impl MediumFit {
     /// The quantities a renderer takes, each std from the covariance by its gradient in u.
     pub fn derived(&self) -> Derived {
