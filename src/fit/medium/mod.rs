@@ -710,9 +710,9 @@ pub fn model_reference() -> Vec<f64> {
 }
 
 /// The largest relative difference between two [`model_reference`]s (infinite when their
-/// lengths differ).
+/// lengths differ or a value is not finite).
 pub fn reference_difference(a: &[f64], b: &[f64]) -> f64 {
-    if a.len() != b.len() {
+    if a.len() != b.len() || !a.iter().chain(b).all(|v| v.is_finite()) {
         return f64::INFINITY;
     }
     a.iter()
