@@ -382,39 +382,39 @@ const TALLY_BANDS: [(usize, usize); 7] = [
 #[ignore = "by hand: cargo test --release --test it -- --ignored medium::diffusion_against_the_photon_tally --nocapture"]
 fn diffusion_against_the_photon_tally() {
     use workbench::model::sphere_diffusion::Sources;
-    use workbench::synth::photon_tally::{trace, TallyScene};
-    for radius in [15.0, 35.0] {
-        for sigma_t in [0.5, 1.0, 3.0] {
-            for albedo in [0.7, 0.9, 0.97, 0.995] {
-                for eta in [1.3, 1.44, 1.6] {
-                    let scene = TallyScene {
-                        radius,
-                        sigma_t,
-                        albedo,
-                        eta,
-                        alpha: 0.0,
-                    };
-                    let t = trace(&scene, 2_000_000, 1);
-                    let m = Medium::isotropic(sigma_t, albedo, eta);
-                    for v in [Sources::Shell, Sources::Beam(4)] {
-                        let model = SphereDiffusion::with_sources(&m, radius, v);
-                        let cells: Vec<String> = TALLY_BANDS
-                            .iter()
-                            .map(|&(lo, hi)| {
-                                let e = t.exitance(lo, hi);
-                                format!("{:6.3}", e.value / band_mean(&model, lo, hi))
-                            })
-                            .collect();
-                        println!(
-                            "R {radius:4} σt {sigma_t:3} α {albedo:5} η {eta:4} {:10}: {}",
-                            format!("{v:?}"),
-                            cells.join(" ")
-                        );
-                    }
-                }
-            }
+    for (radius, sigma_t, albedo, eta) in range_spheres() {
+        let t = smooth_tally(radius, sigma_t, albedo, eta, 2_000_000, 1);
+        let m = Medium::isotropic(sigma_t, albedo, eta);
+        for v in [Sources::Shell, Sources::Beam(4)] {
+            let model = SphereDiffusion::with_sources(&m, radius, v);
+            let cells: Vec<String> = TALLY_BANDS
+                .iter()
+                .map(|&(lo, hi)| {
+                    let e = t.exitance(lo, hi);
+                    format!("{:6.3}", e.value / band_mean(&model, lo, hi))
+                })
+                .collect();
+            println!(
+                "R {radius:4} σt {sigma_t:3} α {albedo:5} η {eta:4} {:10}: {}",
+                format!("{v:?}"),
+                cells.join(" ")
+            );
         }
     }
+}
+
+/// The 72 smooth spheres the profiles are compared on against the photon tally (radius, σt,
+/// albedo, η): radius 15 and 35 mm, σt 0.5, 1 and 3 /mm, albedo 0.7–0.995, η 1.3–1.6.
+fn range_spheres() -> impl Iterator<Item = (f64, f64, f64, f64)> {
+    [15.0, 35.0].into_iter().flat_map(|radius| {
+        [0.5, 1.0, 3.0].into_iter().flat_map(move |sigma_t| {
+            [0.7, 0.9, 0.97, 0.995].into_iter().flat_map(move |albedo| {
+                [1.3, 1.44, 1.6]
+                    .into_iter()
+                    .map(move |eta| (radius, sigma_t, albedo, eta))
+            })
+        })
+    })
 }
 
 /// Christensen and Burley's normalized diffusion carried round the sphere by chord length, at
@@ -423,78 +423,67 @@ fn diffusion_against_the_photon_tally() {
 /// section), beside the classical dipole carried the same way with its level fitted, and the
 /// beam sources' ratio with nothing fitted. Over the spheres of `diffusion_against_the_photon_tally`
 /// (the same photons), the table behind docs/medium.md ("Normalized diffusion carried round the
-/// sphere"); run by hand (about 5 min).
+/// sphere"); run by hand (about 2 min).
 #[test]
 #[ignore = "by hand: cargo test --release --test it -- --ignored medium::normalized_diffusion_against_the_photon_tally --nocapture"]
 fn normalized_diffusion_against_the_photon_tally() {
     use workbench::model::normalized_diffusion::NormalizedDiffusion;
     use workbench::model::sphere_diffusion::Sources;
-    use workbench::synth::photon_tally::{trace, TallyScene};
     let lit = &TALLY_BANDS[..5];
-    for radius in [15.0, 35.0] {
-        for sigma_t in [0.5, 1.0, 3.0] {
-            for albedo in [0.7, 0.9, 0.97, 0.995] {
-                for eta in [1.3, 1.44, 1.6] {
-                    let scene = TallyScene {
-                        radius,
-                        sigma_t,
-                        albedo,
-                        eta,
-                        alpha: 0.0,
-                    };
-                    let t = trace(&scene, 2_000_000, 1);
-                    let tally: Vec<f64> = lit
-                        .iter()
-                        .map(|&(lo, hi)| t.exitance(lo, hi).value)
-                        .collect();
-                    let m = Medium::isotropic(sigma_t, albedo, eta);
-                    let carried = |profile: &dyn Fn(f64) -> f64, reach: f64, scale: f64| {
-                        lit.iter()
-                            .map(|&(lo, hi)| {
-                                band_mean_of(
-                                    |c| over_sphere(profile, radius, c, eta, reach, scale),
-                                    lo,
-                                    hi,
-                                )
-                            })
-                            .collect::<Vec<f64>>()
-                    };
-                    let burley = |d: f64| {
-                        let p = NormalizedDiffusion {
-                            surface_albedo: 1.0,
-                            d,
-                        };
-                        carried(&|r| p.profile(r), p.reach(), d)
-                    };
-                    let misfit = |ln_d: f64| {
-                        let (_, r) = level_out(&tally, &burley(ln_d.exp()));
-                        r.iter().map(|x| x.ln().powi(2)).sum::<f64>()
-                    };
-                    let ln_d = golden_section(
-                        (0.02 / m.sigma_t_reduced()).ln(),
-                        (10.0 / m.sigma_tr()).ln(),
-                        misfit,
-                    );
-                    let d = ln_d.exp();
-                    let (a, fitted) = level_out(&tally, &burley(d));
-                    let dipole = Dipole::new(&m);
-                    let (dipole_level, dipole_shape) = level_out(
-                        &tally,
-                        &carried(&|r| dipole.profile(r), dipole.reach(), dipole.z_r),
-                    );
-                    let beam = SphereDiffusion::with_sources(&m, radius, Sources::Beam(4));
-                    let beam_ratios: Vec<f64> = lit
-                        .iter()
-                        .zip(&tally)
-                        .map(|(&(lo, hi), t)| t / band_mean(&beam, lo, hi))
-                        .collect();
-                    let cells = |v: &[f64]| {
-                        v.iter()
-                            .map(|x| format!("{x:6.3}"))
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    };
-                    println!(
+    for (radius, sigma_t, albedo, eta) in range_spheres() {
+        let t = smooth_tally(radius, sigma_t, albedo, eta, 2_000_000, 1);
+        let tally: Vec<f64> = lit
+            .iter()
+            .map(|&(lo, hi)| t.exitance(lo, hi).value)
+            .collect();
+        let m = Medium::isotropic(sigma_t, albedo, eta);
+        let carried = |profile: &dyn Fn(f64) -> f64, reach: f64, scale: f64| {
+            lit.iter()
+                .map(|&(lo, hi)| {
+                    band_mean_of(
+                        |c| over_sphere(profile, radius, c, eta, reach, scale),
+                        lo,
+                        hi,
+                    )
+                })
+                .collect::<Vec<f64>>()
+        };
+        let burley = |d: f64| {
+            let p = NormalizedDiffusion {
+                surface_albedo: 1.0,
+                d,
+            };
+            carried(&|r| p.profile(r), p.reach(), d)
+        };
+        let misfit = |ln_d: f64| {
+            let (_, r) = level_out(&tally, &burley(ln_d.exp()));
+            r.iter().map(|x| x.ln().powi(2)).sum::<f64>()
+        };
+        let ln_d = golden_section(
+            (0.02 / m.sigma_t_reduced()).ln(),
+            (10.0 / m.sigma_tr()).ln(),
+            misfit,
+        );
+        let d = ln_d.exp();
+        let (a, fitted) = level_out(&tally, &burley(d));
+        let dipole = Dipole::new(&m);
+        let (dipole_level, dipole_shape) = level_out(
+            &tally,
+            &carried(&|r| dipole.profile(r), dipole.reach(), dipole.z_r),
+        );
+        let beam = SphereDiffusion::with_sources(&m, radius, Sources::Beam(4));
+        let beam_ratios: Vec<f64> = lit
+            .iter()
+            .zip(&tally)
+            .map(|(&(lo, hi), t)| t / band_mean(&beam, lo, hi))
+            .collect();
+        let cells = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x:6.3}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        println!(
                         "R {radius:4} σt {sigma_t:3} α {albedo:5} η {eta:4} | burley A {a:.3} \
                          d·σtr {:.3} d·σt′ {:.3}: {} spread {:.3} | dipole level {dipole_level:.3}: \
                          {} spread {:.3} | beam: {} spread {:.3}",
@@ -507,9 +496,6 @@ fn normalized_diffusion_against_the_photon_tally() {
                         cells(&beam_ratios),
                         spread(&beam_ratios),
                     );
-                }
-            }
-        }
     }
 }
 
