@@ -239,7 +239,11 @@ impl Scene {
                 }
                 out.scatterings += 1;
                 if out.scatterings > ROULETTE_AFTER {
-                    let survive = w.iter().cloned().fold(0.0, f64::max).min(0.95);
+                    // Survival at most 1: a roulette never lifts the largest weight above 1.
+                    // Capped lower, long paths' weights grew without bound and past albedo
+                    // 0.975 the estimator's variance was infinite (docs/pbr.md, "Russian
+                    // roulette at high albedo").
+                    let survive = w.iter().cloned().fold(0.0, f64::max).min(1.0);
                     if rng.random::<f64>() >= survive {
                         break;
                     }
