@@ -2,7 +2,8 @@
 # Render the four corners of the range of media (datasets/pbr-range/, docs/medium.md,
 # "Across the range"): σt 0.5 and 3 /mm, albedo 0.70–0.80 and 0.985–0.995, η 1.3 and
 # 1.6, each session under its own light and noise seed, as the coverage sessions of
-# scripts/pbr-seeds.sh (640×480, fx 800, 1024 samples a pixel; 30–100 s a session on 2 cores: the white ones the longest).
+# scripts/pbr-seeds.sh (640×480, fx 800, 1024 samples a pixel; 30–100 s a session on 2 cores,
+# the white ones the longest).
 # The suite solves thin-dark (`medium::a_first_start_at_the_walls_is_started_again`,
 # `uncertainty::a_clipped_highlights_eta_is_covered_with_the_detectors_alpha`); the table in
 # docs/medium.md solves all four.

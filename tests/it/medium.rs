@@ -2238,6 +2238,21 @@ fn truth_outlines(dir: &Path) {
     .unwrap();
 }
 
+/// A physically based session with truth.json by name: in `datasets/`, `datasets/pbr-seeds/`,
+/// `datasets/pbr-range/` or ../shared/data/ (`pbr-jade`).
+fn physically_based_session(name: &str) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
+    [
+        root.join(name),
+        root.join("pbr-seeds").join(name),
+        root.join("pbr-range").join(name),
+    ]
+    .into_iter()
+    .chain(common::shared_data().map(|s| s.join(name)))
+    .find(|p| p.join("truth.json").exists())
+    .unwrap_or_else(|| panic!("no physically based session {name} with truth.json"))
+}
+
 /// The photos over the medium fit's model at the truth (its medium, η, roughness, light and
 /// irradiance), per band of θ past the lit side, every sphere and channel of a physically based
 /// session (`SESSION`, default `pbr-wax`; `datasets/`, `datasets/pbr-seeds/`, `datasets/pbr-range/`
@@ -2250,17 +2265,7 @@ fn truth_outlines(dir: &Path) {
 fn the_renders_over_the_model_at_the_truth() {
     use workbench::fit::medium::{predict_with, Px, Radius};
     let name = std::env::var("SESSION").unwrap_or_else(|_| "pbr-wax".into());
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
-    let src = [
-        root.join(&name),
-        root.join("pbr-seeds").join(&name),
-        root.join("pbr-range").join(&name),
-    ]
-    .into_iter()
-    .chain(common::shared_data().map(|s| s.join(&name)))
-    .find(|p| p.join("truth.json").exists())
-    .expect("a session with truth.json");
-    let dir = common::session_copy(&src);
+    let dir = common::session_copy(&physically_based_session(&name));
     // `TRUTH_OUTLINES=1`: every sphere's outline replaced by the truth's (its centre from
     // truth.json), so the geometry is not the detector's.
     if std::env::var("TRUTH_OUTLINES").is_ok_and(|v| v == "1") {
@@ -2554,14 +2559,7 @@ fn the_outline_sensitivity_follows_refits() {
 fn the_fit_from_the_truths_inputs() {
     use workbench::fit::medium::{fit, pixels, start, Held, MediumFit, Setup};
     let name = std::env::var("SESSION").unwrap_or_else(|_| "jade-6".into());
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
-    let src = ["pbr-seeds", "pbr-range"]
-        .iter()
-        .map(|d| root.join(d).join(&name))
-        .chain(common::shared_data().map(|s| s.join(&name)))
-        .find(|p| p.join("truth.json").exists())
-        .expect("a session of datasets/pbr-seeds, datasets/pbr-range or ../shared/data");
-    let dir = common::session_copy(&src);
+    let dir = common::session_copy(&physically_based_session(&name));
     load_quiet(dir.path());
     truth_outlines(dir.path());
     let t = truth(dir.path());
