@@ -21,6 +21,7 @@
 
 use crate::model::fresnel;
 use crate::model::quadrature::nodes;
+use crate::model::rough_level;
 use crate::model::specular::smith_g1;
 use std::f64::consts::PI;
 
@@ -36,22 +37,6 @@ use std::f64::consts::PI;
 /// it and the fit's first order less exact, and is not applied (docs/medium.md, "The rough
 /// level and the exit's tilt over the issue's range").
 pub const EXIT_TILT: f64 = 0.11;
-
-/// The range of s = √(1 − α′), η and α that [`ROUGH_LEVEL`] was fitted on; outside it the
-/// level is held at its edge.
-const FITTED_S: (f64, f64) = (0.07, 0.64);
-const FITTED_ETA: (f64, f64) = (1.3, 1.6);
-const FITTED_ALPHA: f64 = 0.25;
-
-/// The rough boundary's loss of level: GGX microfacets with Smith masking (the renderers'
-/// rough dielectric) do not conserve energy, and light that meets the wall many times inside
-/// (high albedo) loses more. The photon tally over the model entering through T_α, θ 0–60°, is
-/// 1 − α^{3/2} (c₀ + c₁ s + c₂ s² + c₃ (η − 1.45) + c₄ s (η − 1.45)) with s = √(1 − α′), least
-/// squares over 324 spheres (albedo 0.6–0.995, η 1.3–1.6, GGX α 0.05–0.25, σt R 7.5–105):
-/// within 2.3% (rms 0.7%). The earlier fit,
-/// linear in s over albedo 0.9–0.995 and held below, was 11.5% off at albedo 0.6
-/// (`medium::rough_level_and_exit_tilt_against_the_photon_tally`, which prints them).
-pub const ROUGH_LEVEL: [f64; 5] = [1.81371, -3.91595, 1.64992, 1.19089, -2.98659];
 
 /// Below this roughness the boundary is taken as smooth.
 const SMOOTH_ALPHA: f64 = 1e-3;
@@ -151,20 +136,13 @@ impl Boundary {
     }
 
     /// The factor the rough boundary's losses put on the exitance of a medium of reduced albedo
-    /// `reduced_albedo` ([`ROUGH_LEVEL`]; 1 when smooth). Outside the range it was fitted on it
-    /// is held at the range's edge.
-    pub fn level(&self, reduced_albedo: f64) -> f64 {
+    /// `reduced_albedo` on a sphere of optical radius `sigma_t_radius` (σt′R): the photon
+    /// tally's, [`rough_level::factor`]; 1 when smooth.
+    pub fn level(&self, reduced_albedo: f64, sigma_t_radius: f64) -> f64 {
         if self.is_smooth() {
             return 1.0;
         }
-        let s = (1.0 - reduced_albedo)
-            .max(0.0)
-            .sqrt()
-            .clamp(FITTED_S.0, FITTED_S.1);
-        let e = self.eta.clamp(FITTED_ETA.0, FITTED_ETA.1) - 1.45;
-        let c = ROUGH_LEVEL;
-        1.0 - self.alpha.min(FITTED_ALPHA).powf(1.5)
-            * (c[0] + c[1] * s + c[2] * s * s + c[3] * e + c[4] * s * e)
+        rough_level::factor(reduced_albedo, self.eta, self.alpha, sigma_t_radius)
     }
 
     /// The radiance leaving at cos μ per unit exitance, T(μ)/(π c) · (1 + K (μ̄ − μ)) (1/sr,

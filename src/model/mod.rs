@@ -13,6 +13,7 @@ pub mod mixture;
 pub mod normalized_diffusion;
 pub mod quadrature;
 mod radiance;
+pub mod rough_level;
 pub mod specular;
 pub mod sphere_atlas;
 pub mod sphere_diffusion;

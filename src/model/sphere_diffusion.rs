@@ -171,7 +171,8 @@ impl SphereDiffusion {
     /// internal reflection is the smooth one's A), and the rough boundary's loss of level
     /// ([`Boundary::level`]).
     pub fn through(medium: &Medium, radius: f64, boundary: &Boundary) -> SphereDiffusion {
-        let c = level_correction(medium, radius) * boundary.level(medium.reduced_albedo());
+        let c = level_correction(medium, radius)
+            * boundary.level(medium.reduced_albedo(), medium.sigma_t_reduced() * radius);
         let mut d = Self::beam_cut(medium, radius, 4, Cut::FIT, boundary);
         d.coefficients.iter_mut().for_each(|v| *v *= c);
         d
