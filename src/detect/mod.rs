@@ -890,6 +890,7 @@ pub fn run_decoded(
         images,
         seconds: t0.elapsed().as_secs_f64(),
         inputs,
+        build: crate::formats::fingerprint::BUILD.into(),
         edge_weights: None,
     };
     crate::formats::output::write_json(&out, &det)?;

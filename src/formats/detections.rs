@@ -156,6 +156,10 @@ pub struct Detections {
     /// `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
     #[serde(default)]
     pub inputs: crate::formats::fingerprint::Inputs,
+    /// The workbench build that made it (`crate::formats::fingerprint::BUILD`); reused only by
+    /// the same build.
+    #[serde(default)]
+    pub build: String,
     /// Read, never written: builds of 2026-12-07 before `medium_outline` wrote `"contrast"` here
     /// where `outline` itself had been drawn for the medium, so that such a file is not
     /// reused (`solve` detects again).

@@ -10,6 +10,22 @@ use std::hash::Hasher;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
+/// This build of workbench: a hash of its sources, manifest, lock file, features and profile
+/// (build.rs). detections.json and fit.json record it (`"build"`) and are reused only by the
+/// same build, since a changed detector or model gives other results from the same inputs.
+pub const BUILD: &str = env!("WORKBENCH_BUILD");
+
+/// Why an output recording `recorded` as its build cannot be reused by this one (`None`: it can).
+pub fn other_build(recorded: &str) -> Option<String> {
+    match recorded {
+        "" => Some("it records no build (written by an older workbench)".into()),
+        b if b != BUILD => Some(format!(
+            "it was made by another workbench build ({b}; this one {BUILD})"
+        )),
+        _ => None,
+    }
+}
+
 /// Input file (as named by the session) → `"<size>:<hash>"`.
 pub type Inputs = BTreeMap<String, String>;
 
@@ -83,5 +99,16 @@ mod tests {
         changed.insert(a.display().to_string(), "10:0".into());
         assert!(differs(&changed, &now).unwrap().contains("has changed"));
         assert!(differs(&Inputs::new(), &now).unwrap().contains("no inputs"));
+    }
+
+    /// This build's outputs are its own; another's, or one that records none, are not.
+    #[test]
+    fn only_this_build_is_reused() {
+        assert_eq!(BUILD.len(), 16);
+        assert_eq!(other_build(BUILD), None);
+        assert!(other_build("0123456789abcdef")
+            .unwrap()
+            .contains("another workbench build"));
+        assert!(other_build("").unwrap().contains("no build"));
     }
 }

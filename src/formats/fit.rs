@@ -526,6 +526,10 @@ pub struct FitFile {
     /// as `"<bytes>:<hash>"` (`crate::formats::fingerprint`); reused only while they match.
     #[serde(default)]
     pub inputs: crate::formats::fingerprint::Inputs,
+    /// The workbench build that made it (`crate::formats::fingerprint::BUILD`); reused only by
+    /// the same build.
+    #[serde(default)]
+    pub build: String,
 }
 
 /// The paper's baseline beside a joint fit: its assumptions and per-radius fits.

@@ -152,6 +152,7 @@ pub(super) fn fit_file(
         },
         options: fingerprint(opts),
         inputs: l.inputs.clone(),
+        build: crate::formats::fingerprint::BUILD.into(),
     }
 }
 

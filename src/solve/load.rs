@@ -74,6 +74,9 @@ fn reusable(
     if let Some(why) = fingerprint::differs(&d.inputs, now) {
         return Err(format!("detections.json is stale: {why}"));
     }
+    if let Some(why) = fingerprint::other_build(&d.build) {
+        return Err(format!("detections.json is stale: {why}"));
+    }
     if d.edge_weights.as_deref() == Some("contrast") {
         return Err("detections.json's outlines were drawn for the medium alone, by an earlier build (its \"edge_weights\": \"contrast\")".into());
     }
@@ -239,7 +242,10 @@ pub(super) fn cached(
         return None;
     }
     let f: FitFile = crate::formats::output::read_json(&out).ok()?;
-    if f.schema != SCHEMA || f.options != fingerprint(opts) {
+    if f.schema != SCHEMA
+        || f.options != fingerprint(opts)
+        || fingerprint::other_build(&f.build).is_some()
+    {
         return None;
     }
     let mut now = now.clone();

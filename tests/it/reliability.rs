@@ -266,6 +266,53 @@ fn stale_results_are_never_reused_whatever_the_times() {
     );
 }
 
+/// Reuse by build: detections.json and fit.json made by another workbench build (a detector or
+/// model changed since gives other results from the same inputs), or by one from before builds
+/// were recorded, are made again, and the run says why; this build's own are reused.
+#[test]
+fn another_builds_results_are_not_reused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = row_session(tmp.path(), "a", "1");
+    let ao = a.to_str().unwrap();
+    let solve = || {
+        let (code, out, err) = wb(&["--quiet", "solve", "--joint", ao, "--no-jackknife"]);
+        assert!(code == 0 || code == 3, "{err}");
+        out
+    };
+    let first = solve();
+    assert!(first.contains("detection: ran"), "{first}");
+    assert!(solve().contains("fit.json reused"));
+    let rewrite = |name: &str, build: Option<&str>| {
+        let path = a.join(name);
+        let mut j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(j["build"].as_str().unwrap().len(), 16, "{name}");
+        match build {
+            Some(b) => j["build"] = b.into(),
+            None => {
+                j.as_object_mut().unwrap().remove("build");
+            }
+        }
+        std::fs::write(&path, serde_json::to_string(&j).unwrap()).unwrap();
+    };
+    rewrite("detections.json", Some("0123456789abcdef"));
+    rewrite("fit.json", Some("0123456789abcdef"));
+    let other = solve();
+    assert!(!other.contains("fit.json reused"), "{other}");
+    assert!(
+        other.contains("detections.json is stale: it was made by another workbench build"),
+        "{other}"
+    );
+    rewrite("detections.json", None);
+    let older = solve();
+    assert!(!older.contains("fit.json reused"), "{older}");
+    assert!(
+        older.contains("detections.json is stale: it records no build"),
+        "{older}"
+    );
+    assert!(solve().contains("fit.json reused"));
+}
+
 /// SIGINT or SIGTERM in the middle of a set (issue 33: `plot` and `lut` left `.workbench-*.tmp`
 /// files): the run deletes its temporaries, exits with 128 + the signal, and the previous
 /// outputs stay as they were. The run is paused after its second file (a test hook) and signalled
