@@ -52,6 +52,9 @@ impl fmt::Display for Closed {
             line(f, &format!("r = {} mm", r.radius_mm), &r.comparison)?;
         }
         line(f, "all", &j.overall)?;
+        for n in &j.notes {
+            writeln!(f, "note: {n}")?;
+        }
         for p in &self.0.files {
             writeln!(f, "wrote    {}", p.display())?;
         }

@@ -1162,11 +1162,12 @@ fn the_medium_of_the_soap_renders() {
 /// note; σa −5.6, −7.2, −8.7%, σs′ +26.1, +25.0, +23.7% (± 19–20%), η 1.721 ± 0.084; every error
 /// within 1.45 of its std; residuals 1.05 of the noise (docs/medium.md, "A second start where the first ends at
 /// the walls"). Asserted: the note, no edge note, every error within 2 of its std, σa within
-/// 15% and η within 0.2 of the truth.
+/// 15% and η within 0.2 of the truth; and that `close-loop` says its loop does not close
+/// ([`the_loop_does_not_close`]).
 #[test]
 fn a_first_start_at_the_walls_is_started_again() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-range/thin-dark");
-    let (_dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
+    let (dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
     let mut worst = (m.eta.value - t.media[0].eta).abs() / m.eta.std;
     for c in 0..3 {
@@ -1210,6 +1211,41 @@ fn a_first_start_at_the_walls_is_started_again() {
         "{}",
         m.eta.value
     );
+    the_loop_does_not_close(&dir.path().join("fit.json"));
+}
+
+/// thin-dark's fitted medium (σs′ 25% and η 0.12 off: the model at albedo 0.7–0.8), path-traced
+/// back, meets the photos about twice as badly as the model the fit used (measured 2026-12-08 at
+/// 1024 spp and 2000 pixels a sphere: 6.47 ± 0.06% against 3.38%, 1.91; at 256 spp and 400
+/// pixels, as here, 6.45 ± 0.24% against 3.37%, 1.92): `close-loop` says the loop does not close, in its output and
+/// close-loop.json. Asserted: the note, and the ratio above 1.6.
+fn the_loop_does_not_close(fit: &Path) {
+    let out = fit.with_file_name("loop");
+    let (code, stdout, err) = common::wb(&[
+        "close-loop",
+        fit.to_str().unwrap(),
+        "--spp",
+        "256",
+        "--pixels",
+        "400",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let j: workbench::synth::close_loop::CloseLoopJson =
+        serde_json::from_str(&std::fs::read_to_string(out.join("close-loop.json")).unwrap())
+            .unwrap();
+    println!(
+        "thin-dark close-loop: path-traced {:.4} ± {:.4}, model {:.4}, ratio {:.3}",
+        j.overall.render_rel_rmse,
+        j.overall.render_rel_rmse_std,
+        j.overall.medium_rel_rmse,
+        j.overall.render_over_medium
+    );
+    assert!(j.overall.render_over_medium > 1.6, "{:?}", j.overall);
+    assert_eq!(j.notes.len(), 1, "{:?}", j.notes);
+    assert!(j.notes[0].starts_with("the loop does not close"));
+    assert!(stdout.contains("note: the loop does not close"), "{stdout}");
 }
 
 /// The bundled physically based jade (../shared/data/pbr-jade, its five single-sphere photos:
@@ -1556,9 +1592,10 @@ fn mitsuba_reads_and_renders_the_export(fit: &Path, m: &workbench::formats::fit:
 /// sphere, not a random walk). Measured (2026-12-05, θ up to 105°) on soap (15 mm held out of
 /// the fit) at 1024 spp, 600 pixels a sphere: path-traced 4.26 ± 0.16%, model 3.91%, so 1.09 of
 /// it (per radius 0.87–1.19; with the deepest shadow too 1.03, at 2000 pixels without the
-/// hold-out 1.04), the CDRF 5.60%.
-/// Asserted: 0.85–1.2 overall (the issue's goal is 1.5) and the CDRF worse than the
-/// path-traced medium; the rendered medium is σt = σa + σs′, albedo σs′/σt; the figure is
+/// hold-out 1.04), the CDRF 5.60%; on 2026-12-08 (α measured, the noise a curve, the rough
+/// level the tally's table) 3.68 ± 0.12% against the model's 3.76%, 0.98, the CDRF 5.49%.
+/// Asserted: 0.85–1.2 overall (the issue's goal is 1.5), so no note that the loop does not
+/// close, and the CDRF worse than the path-traced medium; the rendered medium is σt = σa + σs′, albedo σs′/σt; the figure is
 /// drawn.
 fn the_loop_closes(fit: &Path, m: &workbench::formats::fit::MediumJson) {
     let out = fit.with_file_name("loop");
@@ -1596,6 +1633,7 @@ fn the_loop_closes(fit: &Path, m: &workbench::formats::fit::MediumJson) {
         );
     }
     assert!((0.85..1.2).contains(&o.render_over_medium), "{o:?}");
+    assert!(j.notes.is_empty(), "{:?}", j.notes);
     assert!(o.cdrf_rel_rmse > o.render_rel_rmse, "{o:?}");
     assert_eq!(j.radii.len(), 5);
     // 3° bands up to 105°, each with at least 10 pixels: at 600 pixels a sphere the bands nearest
