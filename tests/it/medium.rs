@@ -1214,27 +1214,27 @@ fn a_first_start_at_the_walls_is_started_again() {
     the_loop_does_not_close(&dir.path().join("fit.json"));
 }
 
+/// `workbench close-loop <fit> <args> --out <loop beside fit>`: its close-loop.json and what it
+/// printed.
+fn close_loop(fit: &Path, args: &[&str]) -> (workbench::synth::close_loop::CloseLoopJson, String) {
+    let out = fit.with_file_name("loop");
+    let mut all = vec!["close-loop", fit.to_str().unwrap()];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    let (code, stdout, err) = common::wb(&all);
+    assert_eq!(code, 0, "{err}");
+    let j = serde_json::from_str(&std::fs::read_to_string(out.join("close-loop.json")).unwrap())
+        .unwrap();
+    (j, stdout)
+}
+
 /// thin-dark's fitted medium (σs′ 25% and η 0.12 off: the model at albedo 0.7–0.8), path-traced
 /// back, meets the photos about twice as badly as the model the fit used (measured 2026-12-08 at
 /// 1024 spp and 2000 pixels a sphere: 6.47 ± 0.06% against 3.38%, 1.91; at 256 spp and 400
 /// pixels, as here, 6.45 ± 0.24% against 3.37%, 1.92): `close-loop` says the loop does not close, in its output and
 /// close-loop.json. Asserted: the note, and the ratio above 1.6.
 fn the_loop_does_not_close(fit: &Path) {
-    let out = fit.with_file_name("loop");
-    let (code, stdout, err) = common::wb(&[
-        "close-loop",
-        fit.to_str().unwrap(),
-        "--spp",
-        "256",
-        "--pixels",
-        "400",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let j: workbench::synth::close_loop::CloseLoopJson =
-        serde_json::from_str(&std::fs::read_to_string(out.join("close-loop.json")).unwrap())
-            .unwrap();
+    let (j, stdout) = close_loop(fit, &["--spp", "256", "--pixels", "400"]);
     println!(
         "thin-dark close-loop: path-traced {:.4} ± {:.4}, model {:.4}, ratio {:.3}",
         j.overall.render_rel_rmse,
@@ -1598,20 +1598,8 @@ fn mitsuba_reads_and_renders_the_export(fit: &Path, m: &workbench::formats::fit:
 /// close, and the CDRF worse than the path-traced medium; the rendered medium is σt = σa + σs′, albedo σs′/σt; the figure is
 /// drawn.
 fn the_loop_closes(fit: &Path, m: &workbench::formats::fit::MediumJson) {
+    let (j, _) = close_loop(fit, &["--pixels", "600"]);
     let out = fit.with_file_name("loop");
-    let (code, _, err) = common::wb(&[
-        "--quiet",
-        "close-loop",
-        fit.to_str().unwrap(),
-        "--pixels",
-        "600",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let j: workbench::synth::close_loop::CloseLoopJson =
-        serde_json::from_str(&std::fs::read_to_string(out.join("close-loop.json")).unwrap())
-            .unwrap();
     for c in 0..3 {
         let (a, s) = (m.sigma_a_per_mm.value[c], m.sigma_s_reduced_per_mm.value[c]);
         assert!((j.rendered.sigma_t_per_mm[c] - (a + s)).abs() < 1e-12 * (a + s));

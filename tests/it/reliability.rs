@@ -216,6 +216,14 @@ fn bench_keeps_folders_it_did_not_make() {
     );
 }
 
+/// `workbench --quiet solve --joint <session> --no-jackknife`, what it printed (exit 0 or 3).
+fn quick_solve(session: &Path) -> String {
+    let s = session.to_str().unwrap();
+    let (code, out, err) = wb(&["--quiet", "solve", "--joint", s, "--no-jackknife"]);
+    assert!(code == 0 || code == 3, "{err}");
+    out
+}
+
 /// Reuse by content: a photo replaced by another with an old modification time (as `cp -p` or
 /// `rsync -a` leave it) makes solve detect and fit again; only touching the files does not.
 #[test]
@@ -225,12 +233,7 @@ fn stale_results_are_never_reused_whatever_the_times() {
         row_session(tmp.path(), "a", "1"),
         row_session(tmp.path(), "b", "2"),
     );
-    let ao = a.to_str().unwrap();
-    let solve = || {
-        let (code, out, err) = wb(&["--quiet", "solve", "--joint", ao, "--no-jackknife"]);
-        assert!(code == 0 || code == 3, "{err}");
-        out
-    };
+    let solve = || quick_solve(&a);
     let first = solve();
     assert!(first.contains("detection: ran"), "{first}");
     // Touched: every file newer, nothing changed: both reused.
@@ -273,12 +276,7 @@ fn stale_results_are_never_reused_whatever_the_times() {
 fn another_builds_results_are_not_reused() {
     let tmp = tempfile::tempdir().unwrap();
     let a = row_session(tmp.path(), "a", "1");
-    let ao = a.to_str().unwrap();
-    let solve = || {
-        let (code, out, err) = wb(&["--quiet", "solve", "--joint", ao, "--no-jackknife"]);
-        assert!(code == 0 || code == 3, "{err}");
-        out
-    };
+    let solve = || quick_solve(&a);
     let first = solve();
     assert!(first.contains("detection: ran"), "{first}");
     assert!(solve().contains("fit.json reused"));
