@@ -1098,9 +1098,9 @@ fn medium_solve_in(
 /// lobe's 0.071 ± 0.014 (asserted within 0.025 of the truth). (With the lobe's α held, 2026-12-05: σa −0.7, −1.8, −2.3%,
 /// σs′ −1.3, −2.0, −2.5%, held out 3.82%. With the deepest shadow fitted too: σa +1.4, −0.2, −1.2%,
 /// held out 3.96%; before the flux along the surface and η's combination: η 1.402, σa +5 to
-/// +6%, σs′ +7 to +9%, held out 4.21%. Now, 2026-12-08, the noise a curve and the rough level
-/// the tally's table: η 1.397; σa −1.0, −0.5, +0.2%; σs′ +2.6, +2.4, +2.6%; residuals 1.00×
-/// the noise; held out 3.91% against 7.33%.) Asserted: η within 0.015, σa and σs′ within 5%, residuals
+/// +6%, σs′ +7 to +9%, held out 4.21%. Now, 2026-12-08, the noise a curve, the rough level
+/// the tally's table and the surface's reflection in the model: η 1.397; σa −0.2, +0.2, +0.9%;
+/// σs′ +2.0, +1.8, +2.0%; residuals 1.00× the noise; held out 3.90% against 7.33%.) Asserted: η within 0.015, σa and σs′ within 5%, residuals
 /// below 1.1× the noise, the held-out error within 4.2% and below the CDRF's. (Coverage is not
 /// asserted here: the stated errors' model term was set from this session and wax.)
 #[test]
@@ -1154,18 +1154,17 @@ fn the_medium_of_the_soap_renders() {
 
 /// A corner of the issue's range whose joint fit's η is far off (`datasets/pbr-range/thin-dark`:
 /// σt 0.5 /mm, albedo 0.70/0.75/0.80, η 1.6, GGX α 0.1; its highlights clipped over their core,
-/// so the lobe's height is not seen and the joint fit reads η 2.67). From that start the first
-/// stage ran η and α to their range's walls (2.48, 0.594) with residuals 1.20 of the noise, σs′
-/// +200% against a stated ± 20% (before 2026-12-07, later: said by the edge note only); from the
-/// second start at η 1.5 it reaches a lower cost. Measured (2026-12-08, 15 mm held out, the
-/// rough level the tally's table, the joint η widened by η at the detector's α): the restart's
-/// note; σa −5.6, −7.2, −8.7%, σs′ +26.1, +25.0, +23.7% (± 19–20%), η 1.721 ± 0.084; every error
-/// within 1.45 of its std; residuals 1.05 of the noise (docs/medium.md, "A second start where the first ends at
-/// the walls"). Asserted: the note, no edge note, every error within 2 of its std, σa within
-/// 15% and η within 0.2 of the truth; and that `close-loop` says its loop does not close
-/// ([`the_loop_does_not_close`]).
+/// so the lobe's height is not seen and the joint fit reads η 2.67). Before the surface's
+/// reflection was in the medium model (2026-12-08) its first stage ran to the walls of its range
+/// and was started again (`fit::medium`'s second start), and the fit ended with σs′ +24–26% and
+/// η +0.12, whose medium, path-traced, met the photos 1.91 times worse than the model (the loop
+/// open). Measured now (15 mm held out): σa +7.1, +7.2, +7.1%, σs′ +0.4, +0.5, +0.8%, η 1.567 ±
+/// 0.073, every error within 0.53 of its std, residuals 1.05 of the noise, the first stage inside
+/// its range; `close-loop` at 256 spp and 400 pixels a sphere 0.94 (at the defaults 3.16 ± 0.06%
+/// against the model's 3.34%). Asserted: σa and σs′ within the issue's 10%, η within 0.06, every
+/// error within 1.5 of its std, no edge note, and the loop closed (below 1.2, no note).
 #[test]
-fn a_first_start_at_the_walls_is_started_again() {
+fn the_thin_dark_corner_is_measured_and_its_loop_closes() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-range/thin-dark");
     let (dir, t, f) = medium_solve(&src, &["--holdout", "15"]);
     let m = f.medium.as_ref().expect("fit.json's medium");
@@ -1176,27 +1175,19 @@ fn a_first_start_at_the_walls_is_started_again() {
             ("σs′", &m.sigma_s_reduced_per_mm, t.media[c].sigma_s_reduced),
         ] {
             let z = (fitted.value[c] - truth).abs() / fitted.std[c];
+            let off = fitted.value[c] / truth - 1.0;
             println!(
                 "channel {c}: {name} {:+.1}% ± {:.1}% ({z:.2} std)",
-                100.0 * (fitted.value[c] / truth - 1.0),
+                100.0 * off,
                 100.0 * fitted.std[c] / truth
             );
+            assert!(off.abs() < 0.10, "{name} channel {c}: {off}");
             worst = worst.max(z);
         }
-        let off = (m.sigma_a_per_mm.value[c] / t.media[c].sigma_a - 1.0).abs();
-        assert!(off < 0.15, "σa channel {c} {off}");
     }
     println!(
         "η {:.3} ± {:.3}, α {:.3}; worst error {worst:.2} std; notes {:?}",
         m.eta.value, m.eta.std, m.alpha, f.notes
-    );
-    assert!(
-        f.notes
-            .iter()
-            .any(|n| n.starts_with("medium: started from the joint fit's η")
-                && n.contains("with η, α at the edge")),
-        "{:?}",
-        f.notes
     );
     assert!(
         !f.notes
@@ -1205,13 +1196,26 @@ fn a_first_start_at_the_walls_is_started_again() {
         "{:?}",
         f.notes
     );
-    assert!(worst < 2.0, "{worst}");
+    assert!(worst < 1.5, "{worst}");
     assert!(
-        (m.eta.value - t.media[0].eta).abs() < 0.2,
+        (m.eta.value - t.media[0].eta).abs() < 0.06,
         "{}",
         m.eta.value
     );
-    the_loop_does_not_close(&dir.path().join("fit.json"));
+    let (j, stdout) = close_loop(
+        &dir.path().join("fit.json"),
+        &["--spp", "256", "--pixels", "400"],
+    );
+    println!(
+        "thin-dark close-loop: path-traced {:.4} ± {:.4}, model {:.4}, ratio {:.3}",
+        j.overall.render_rel_rmse,
+        j.overall.render_rel_rmse_std,
+        j.overall.medium_rel_rmse,
+        j.overall.render_over_medium
+    );
+    assert!(j.overall.render_over_medium < 1.2, "{:?}", j.overall);
+    assert!(j.notes.is_empty(), "{:?}", j.notes);
+    assert!(!stdout.contains("note:"), "{stdout}");
 }
 
 /// `workbench close-loop <fit> <args> --out <loop beside fit>`: its close-loop.json and what it
@@ -1228,26 +1232,6 @@ fn close_loop(fit: &Path, args: &[&str]) -> (workbench::synth::close_loop::Close
     (j, stdout)
 }
 
-/// thin-dark's fitted medium (σs′ 25% and η 0.12 off: the model at albedo 0.7–0.8), path-traced
-/// back, meets the photos about twice as badly as the model the fit used (measured 2026-12-08 at
-/// 1024 spp and 2000 pixels a sphere: 6.47 ± 0.06% against 3.38%, 1.91; at 256 spp and 400
-/// pixels, as here, 6.45 ± 0.24% against 3.37%, 1.92): `close-loop` says the loop does not close, in its output and
-/// close-loop.json. Asserted: the note, and the ratio above 1.6.
-fn the_loop_does_not_close(fit: &Path) {
-    let (j, stdout) = close_loop(fit, &["--spp", "256", "--pixels", "400"]);
-    println!(
-        "thin-dark close-loop: path-traced {:.4} ± {:.4}, model {:.4}, ratio {:.3}",
-        j.overall.render_rel_rmse,
-        j.overall.render_rel_rmse_std,
-        j.overall.medium_rel_rmse,
-        j.overall.render_over_medium
-    );
-    assert!(j.overall.render_over_medium > 1.6, "{:?}", j.overall);
-    assert_eq!(j.notes.len(), 1, "{:?}", j.notes);
-    assert!(j.notes[0].starts_with("the loop does not close"));
-    assert!(stdout.contains("note: the loop does not close"), "{stdout}");
-}
-
 /// The bundled physically based jade (../shared/data/pbr-jade, its five single-sphere photos:
 /// σt 2 /mm, albedo 0.90/0.96/0.92, η 1.62, GGX α 0.05), whose faint lobe the joint fit reads as
 /// α 0.13 ± 0.12: the medium fit measures the roughness from its pixels and, with it, σa and σs′.
@@ -1258,7 +1242,9 @@ fn the_loop_does_not_close(fit: &Path) {
 /// outlines (2026-12-07; docs/medium.md, "Each model its own outlines"): α 0.043 ± 0.020,
 /// σa −5.4, −2.7, −5.8%, σs′ −0.2, +7.0, +0.2%, η 1.703 ± 0.108, every error within 0.77 of its
 /// std; with the rough level the tally's table (2026-12-08): α 0.043 ± 0.020, σa −5.7, −2.6,
-/// −6.0%, σs′ +0.2, +7.1, +0.6%, η 1.708 ± 0.109, within 0.81. Asserted: α within 0.015 of the truth (the lobe's is 0.08 off), σa and σs′ within the
+/// −6.0%, σs′ +0.2, +7.1, +0.6%, η 1.708 ± 0.109, within 0.81; with the surface's reflection in
+/// the model too: α 0.042 ± 0.019, σa −4.7, −1.4, −5.0%, σs′ −1.4, +5.3, −1.0%, η 1.699 ± 0.114,
+/// within 0.70. Asserted: α within 0.015 of the truth (the lobe's is 0.08 off), σa and σs′ within the
 /// issue's 10%, each error within 1.5 of its stated std.
 #[test]
 fn the_bundled_jade_is_measured_with_its_roughness() {
@@ -2323,38 +2309,9 @@ fn the_renders_over_the_model_at_the_truth() {
             }),
         };
         let predicted = predict_with(t.media, [t.irradiance; 3], t.alpha, &radius);
-        // `LOBE=1`: the surface's GGX reflection (the truth's α and η) added to the model, as the
-        // renders hold it beyond the 25° the fit leaves out (docs/medium.md, "The surface's
-        // reflection beyond the lobe's 25°").
-        let with_lobe = std::env::var("LOBE").is_ok_and(|v| v == "1");
-        let lobe: [Vec<f64>; 3] = std::array::from_fn(|c| {
-            s.obs
-                .iter()
-                .filter(|o| {
-                    described(&o.geometry.normal, &o.geometry.view, &t.light) && o.weight[c] > 0.0
-                })
-                .map(|o| {
-                    let (n, v) = (o.geometry.normal, o.geometry.view);
-                    let f = workbench::model::specular::lobe(
-                        n.dot(&t.light),
-                        n.dot(&v),
-                        t.light.dot(&v),
-                        1.0,
-                        t.alpha,
-                        t.media[0].eta,
-                    );
-                    if with_lobe {
-                        t.irradiance * f.value
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        });
         for (c, (pixels, predicted)) in radius.pixels.iter().zip(&predicted).enumerate() {
             let mut sums = vec![(0.0, 0.0); bands.len() - 1];
-            for ((px, p), l) in pixels.iter().zip(predicted).zip(&lobe[c]) {
-                let p = p + l;
+            for (px, p) in pixels.iter().zip(predicted) {
                 let cos = if by_phi { px.cos_phi } else { px.cos_theta };
                 let theta = cos.clamp(-1.0, 1.0).acos().to_degrees();
                 if let Some(b) = bands.windows(2).position(|w| (w[0]..w[1]).contains(&theta)) {

@@ -11,6 +11,7 @@
 use super::pixels::{Px, Radius, Setup};
 use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
+use crate::model::specular;
 use crate::model::sphere_atlas::{Coordinates, ExitLaw, Profile, SphereAtlas};
 use crate::model::sphere_diffusion::{SphereDiffusion, Tabulated};
 use crate::model::tangential_flux;
@@ -166,7 +167,8 @@ pub(super) fn profiles(radius_mm: f64, p: &Physical) -> [Tabulated; 3] {
 }
 
 /// The predicted radiance of one pixel: E · law(cos φ) · M(θ), times the exit's azimuthal
-/// factor from the flux along the surface ([`tangential_flux`]).
+/// factor from the flux along the surface ([`tangential_flux`]), plus the surface's own GGX
+/// reflection ([`surface`]).
 pub(super) fn predicted(
     e: f64,
     medium: &Medium,
@@ -177,7 +179,20 @@ pub(super) fn predicted(
 ) -> f64 {
     let (m, log_slope) = table.at_with_log_slope(px.cos_theta);
     let (flux, _, _) = flux_at(medium, radius_mm, log_slope, px);
-    e * boundary.exit_law(px.cos_phi) * m * flux
+    e * (boundary.exit_law(px.cos_phi) * m * flux + surface(px, boundary.alpha, medium.eta).value)
+}
+
+/// The surface's own reflection at a pixel, F D G / (4 n·v) (n·l) of the boundary's GGX
+/// roughness `alpha` and index `eta`, with its derivatives ([`specular::lobe`]; zero on a
+/// smooth boundary, whose mirror reflection the fit's pixels leave out). The fit takes pixels
+/// whose half vector is more than 25° from the normal, where a GGX lobe of α 0.1 still reflects
+/// a few percent of a dark medium's radiance (docs/medium.md, "The surface's reflection beyond
+/// the lobe's 25°").
+fn surface(px: &Px, alpha: f64, eta: f64) -> specular::LobeEval {
+    if alpha < 1e-3 {
+        return specular::LobeEval::default();
+    }
+    specular::lobe(px.cos_theta, px.cos_phi, px.cos_light_view, 1.0, alpha, eta)
 }
 
 /// The flux's factor at a pixel ([`tangential_flux::factor`]) with its derivatives, and the
@@ -206,7 +221,7 @@ fn flux_at(
 /// zeros).
 fn predicted_with_gradient(
     e: f64,
-    medium: &Medium,
+    (medium, alpha): (&Medium, f64),
     radius_mm: f64,
     law: &ExitLaw,
     profile: &Profile,
@@ -218,8 +233,10 @@ fn predicted_with_gradient(
     let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
     let (l, dl_deta, dl_dalpha) = law.at(px.cos_phi);
     let scale = e * l;
+    let lobe = surface(px, alpha, medium.eta);
+    let value = scale * m * flux + e * lobe.value;
     if !gradient {
-        return (scale * m * flux, [0.0; 4]);
+        return (value, [0.0; 4]);
     }
     let gradient = std::array::from_fn(|q| {
         let (dm, ds) = profile.d[q].at_node(at);
@@ -232,13 +249,14 @@ fn predicted_with_gradient(
         };
         let mut v = scale * (dm * flux + m * (g.log_slope * ds + own));
         match q {
-            2 => v += e * dl_deta * m * flux,
-            3 => v += e * dl_dalpha * m * flux,
+            2 => v += e * (dl_deta * m * flux + lobe.d_eta),
+            // The lobe's α derivative, in ln α.
+            3 => v += e * (dl_dalpha * m * flux + lobe.d_alpha * alpha),
             _ => {}
         }
         v
     });
-    (scale * m * flux, gradient)
+    (value, gradient)
 }
 
 /// The atlas's profiles, per radius and channel.
@@ -309,6 +327,7 @@ impl<'a> Problem<'a> {
     /// the atlas's coordinates (x, y, η, ln α) of its channel's prediction.
     fn evaluate(&self, gradient: bool) -> (DVector<f64>, Vec<[f64; 4]>) {
         let (media, irradiance) = media(self.u.as_slice(), self.setup);
+        let alpha = roughness(self.u.as_slice(), self.setup);
         let mut out = DVector::zeros(self.rows());
         let mut grad = vec![[0.0; 4]; if gradient { self.pixel_rows() } else { 0 }];
         for (r, radius) in self.radii.iter().enumerate() {
@@ -318,7 +337,7 @@ impl<'a> Problem<'a> {
                 for (k, px) in radius.pixels[c].iter().enumerate() {
                     let (pred, g) = predicted_with_gradient(
                         irradiance[c],
-                        &media[c],
+                        (&media[c], alpha),
                         radius.radius_mm,
                         &self.law,
                         profile,
