@@ -40,7 +40,7 @@ use std::f64::consts::PI;
 pub const EXIT_TILT: f64 = 0.11;
 
 /// Below this roughness the boundary is taken as smooth.
-const SMOOTH_ALPHA: f64 = 1e-3;
+pub const SMOOTH_ALPHA: f64 = 1e-3;
 
 /// μ nodes of a rough boundary's table: T_α at μ = (k/N)², denser toward grazing.
 const TABLE: usize = 64;

@@ -189,7 +189,7 @@ pub(super) fn predicted(
 /// a few percent of a dark medium's radiance (docs/medium.md, "The surface's reflection beyond
 /// the lobe's 25°").
 fn surface(px: &Px, alpha: f64, eta: f64) -> specular::LobeEval {
-    if alpha < 1e-3 {
+    if alpha < crate::model::boundary::SMOOTH_ALPHA {
         return specular::LobeEval::default();
     }
     specular::lobe(px.cos_theta, px.cos_phi, px.cos_light_view, 1.0, alpha, eta)
