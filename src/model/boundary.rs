@@ -6,7 +6,7 @@
 //! that is transmitted, T(μ). Leaving: by reciprocity the radiance that leaves at μ from a
 //! diffuse interior is proportional to the same T(μ), so the exitance M spreads over the outside
 //! hemisphere as the law L/M = T(μ)/(π c), with c = ∫₀¹ T(μ) 2μ dμ so that ∫ L μ dΩ = M, tilted
-//! toward grazing exits as the photon tally measures ([`EXIT_TILT`]).
+//! toward grazing exits as the photon tally measures ([`exit_tilt`]).
 //!
 //! A rough boundary's T_α(μ) is the single-scattering microfacet transmission (Walter et al.
 //! 2007): over the normals m visible from the direction o, D_o(m) = G1(o) ⟨o·m⟩ D(m)/μ, the light
@@ -19,25 +19,12 @@
 //! the light near the terminator that Fresnel's T loses (docs/medium.md, "The rough boundary in
 //! the model").
 
+use crate::model::exit_tilt::{self, Tilt};
 use crate::model::fresnel;
 use crate::model::quadrature::nodes;
 use crate::model::rough_level;
 use crate::model::specular::smith_g1;
 use std::f64::consts::PI;
-
-/// The exit law's tilt K: the photon tally's radiance per unit exitance over T(μ)/(π c) falls
-/// about linearly in μ, 1.03–1.08 at μ = 0.25 and 0.95–0.98 at μ = 0.95 (four media, smooth and
-/// GGX α 0.05–0.15; `medium::rough_boundary_against_the_photon_tally`, slopes 0.08–0.16), which
-/// diffusion's isotropic interior radiance does not give. The law is multiplied by
-/// 1 + K (μ̄ − μ), μ̄ the exit-weighted mean cosine, which keeps its integral. Over the issue's
-/// range the tally's slope follows the albedo, η and α (0.01–0.34; rms 0.018 about
-/// s (0.593 − 0.405 s − 0.663 (η − 1.45) + 0.707 (α − 0.1)), s = √(1 − α′), where this constant
-/// leaves 0.085, at 400 000 photons a sphere; at a million, [0.539, −0.312, −0.606, 0.774], rms
-/// 0.0125 and 0.083: `medium::rough_level_and_exit_tilt_against_the_photon_tally`); that law, tried in
-/// the fit, brought the low-albedo corners nearer the truth but jade's and soap's further from
-/// it and the fit's first order less exact, and is not applied (docs/medium.md, "The rough
-/// level and the exit's tilt over the issue's range").
-pub const EXIT_TILT: f64 = 0.11;
 
 /// Below this roughness the boundary is taken as smooth.
 pub const SMOOTH_ALPHA: f64 = 1e-3;
@@ -146,11 +133,23 @@ impl Boundary {
         rough_level::factor(reduced_albedo, self.eta, self.alpha, sigma_t_radius)
     }
 
-    /// The radiance leaving at cos μ per unit exitance, T(μ)/(π c) · (1 + K (μ̄ − μ)) (1/sr,
-    /// [`EXIT_TILT`]).
-    pub fn exit_law(&self, mu: f64) -> f64 {
-        self.transmission(mu) / (PI * self.hemispherical)
-            * (1.0 + EXIT_TILT * (self.mean_cosine - mu))
+    /// The exit law's tilt K for a medium of reduced albedo `reduced_albedo` behind this
+    /// boundary ([`exit_tilt::tilt`]), with its derivatives.
+    pub fn tilt(&self, reduced_albedo: f64) -> Tilt {
+        exit_tilt::tilt(reduced_albedo, self.eta, self.alpha)
+    }
+
+    /// The radiance leaving at cos μ per unit exitance, T(μ)/(π c) · (1 + K (μ̄ − μ)) (1/sr),
+    /// for a medium of reduced albedo `reduced_albedo` ([`exit_tilt`]).
+    pub fn exit_law(&self, mu: f64, reduced_albedo: f64) -> f64 {
+        self.exit_law_with_slope(mu, self.tilt(reduced_albedo).k).0
+    }
+
+    /// The law at cos μ under the tilt `k`, and its derivative in `k`.
+    pub fn exit_law_with_slope(&self, mu: f64, k: f64) -> (f64, f64) {
+        let untilted = self.transmission(mu) / (PI * self.hemispherical);
+        let lean = untilted * (self.mean_cosine - mu);
+        (untilted + k * lean, lean)
     }
 }
 

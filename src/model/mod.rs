@@ -7,6 +7,7 @@ pub mod boundary;
 pub mod cdrf;
 pub mod dipole;
 pub mod entry;
+pub mod exit_tilt;
 pub mod fresnel;
 pub mod lanes;
 pub mod mixture;

@@ -86,16 +86,18 @@ pub struct ExitLaw {
 }
 
 impl ExitLaw {
-    /// The law at cos μ and its derivatives in η and ln α.
-    pub fn at(&self, mu: f64) -> (f64, f64, f64) {
-        let (mut v, mut de, mut da) = (0.0, 0.0, 0.0);
+    /// The law at cos μ under the exit's tilt `k` ([`crate::model::exit_tilt`]), and its
+    /// derivatives in η and ln α (at that `k`) and in `k`.
+    pub fn at(&self, mu: f64, k: f64) -> (f64, f64, f64, f64) {
+        let (mut v, mut de, mut da, mut dk) = (0.0, 0.0, 0.0, 0.0);
         for (b, w) in &self.boundaries {
-            let l = b.exit_law(mu);
+            let (l, lean) = b.exit_law_with_slope(mu, k);
             v += w[0] * l;
             de += w[1] * l;
             da += w[2] * l;
+            dk += w[0] * lean;
         }
-        (v, de, da)
+        (v, de, da, dk)
     }
 }
 
@@ -432,8 +434,9 @@ mod tests {
             worst = worst.max(off);
             let law = atlas.law(eta, 0.15f64.ln());
             let exact = Boundary::rough(eta, 0.15);
+            let k = exact.tilt(albedo).k;
             for mu in [0.1, 0.5, 0.95] {
-                let (a, b) = (law.at(mu).0, exact.exit_law(mu));
+                let (a, b) = (law.at(mu, k).0, exact.exit_law(mu, albedo));
                 println!("  law at μ {mu}: {:.1e}", a / b - 1.0);
                 assert!((a / b - 1.0).abs() < 6e-5, "law at μ {mu}: {a} against {b}");
             }
@@ -493,18 +496,25 @@ mod tests {
             }
         }
         let a = p.ln_alpha;
-        let (l, dl, dla) = atlas.law(p.eta, a).at(0.6);
-        let numeric =
-            (atlas.law(p.eta + h, a).at(0.6).0 - atlas.law(p.eta - h, a).at(0.6).0) / (2.0 * h);
+        let k = 0.2;
+        let (l, dl, dla, dk) = atlas.law(p.eta, a).at(0.6, k);
+        let numeric = (atlas.law(p.eta + h, a).at(0.6, k).0 - atlas.law(p.eta - h, a).at(0.6, k).0)
+            / (2.0 * h);
         assert!(
             (dl - numeric).abs() < 1e-6 * l,
             "law: {dl} against {numeric}"
         );
-        let numeric =
-            (atlas.law(p.eta, a + h).at(0.6).0 - atlas.law(p.eta, a - h).at(0.6).0) / (2.0 * h);
+        let numeric = (atlas.law(p.eta, a + h).at(0.6, k).0 - atlas.law(p.eta, a - h).at(0.6, k).0)
+            / (2.0 * h);
         assert!(
             (dla - numeric).abs() < 1e-6 * l,
             "law in ln α: {dla} against {numeric}"
+        );
+        let law = atlas.law(p.eta, a);
+        let numeric = (law.at(0.6, k + h).0 - law.at(0.6, k - h).0) / (2.0 * h);
+        assert!(
+            (dk - numeric).abs() < 1e-6 * l,
+            "law in the tilt: {dk} against {numeric}"
         );
     }
 
@@ -545,9 +555,10 @@ mod tests {
                         .fold(0.0f64, f64::max)
                 };
                 let law = atlas.law(eta, alpha.ln());
+                let k = exact.tilt(albedo).k;
                 let off_law = [0.1, 0.3, 0.6, 0.95]
                     .iter()
-                    .map(|&mu| (law.at(mu).0 / exact.exit_law(mu) - 1.0).abs())
+                    .map(|&mu| (law.at(mu, k).0 / exact.exit_law(mu, albedo) - 1.0).abs())
                     .fold(0.0f64, f64::max);
                 let row = [off(0, 90), off(90, 100), off_law];
                 println!("σt′ {sigma_t}, α′ {albedo}, R {radius}, α {alpha:.3}: M 0–90° {:.1e}, 90–100° {:.1e}, law {:.1e}", row[0], row[1], row[2]);

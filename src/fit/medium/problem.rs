@@ -11,6 +11,7 @@
 use super::pixels::{Px, Radius, Setup};
 use crate::model::boundary::Boundary;
 use crate::model::dipole::Medium;
+use crate::model::exit_tilt;
 use crate::model::specular;
 use crate::model::sphere_atlas::{Coordinates, ExitLaw, Profile, SphereAtlas};
 use crate::model::sphere_diffusion::{SphereDiffusion, Tabulated};
@@ -179,7 +180,8 @@ pub(super) fn predicted(
 ) -> f64 {
     let (m, log_slope) = table.at_with_log_slope(px.cos_theta);
     let (flux, _, _) = flux_at(medium, radius_mm, log_slope, px);
-    e * (boundary.exit_law(px.cos_phi) * m * flux + surface(px, boundary.alpha, medium.eta).value)
+    let law = boundary.exit_law(px.cos_phi, medium.reduced_albedo());
+    e * (law * m * flux + surface(px, boundary.alpha, medium.eta).value)
 }
 
 /// The surface's own reflection at a pixel, F D G / (4 n·v) (n·l) of the boundary's GGX
@@ -231,7 +233,8 @@ fn predicted_with_gradient(
     let at = Tabulated::locate(px.cos_theta);
     let (m, log_slope) = profile.value.at_node(at);
     let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
-    let (l, dl_deta, dl_dalpha) = law.at(px.cos_phi);
+    let tilt = exit_tilt::tilt(medium.reduced_albedo(), medium.eta, alpha);
+    let (l, dl_deta, dl_dalpha, dl_dk) = law.at(px.cos_phi, tilt.k);
     let scale = e * l;
     let lobe = surface(px, alpha, medium.eta);
     let value = scale * m * flux + e * lobe.value;
@@ -248,10 +251,12 @@ fn predicted_with_gradient(
             _ => 0.0,
         };
         let mut v = scale * (dm * flux + m * (g.log_slope * ds + own));
+        // The law's, through its own coordinates and through the tilt's.
         match q {
-            2 => v += e * (dl_deta * m * flux + lobe.d_eta),
+            1 => v += e * dl_dk * tilt.d_y * m * flux,
+            2 => v += e * ((dl_deta + dl_dk * tilt.d_eta) * m * flux + lobe.d_eta),
             // The lobe's α derivative, in ln α.
-            3 => v += e * (dl_dalpha * m * flux + lobe.d_alpha * alpha),
+            3 => v += e * ((dl_dalpha + dl_dk * tilt.d_ln_alpha) * m * flux + lobe.d_alpha * alpha),
             _ => {}
         }
         v
