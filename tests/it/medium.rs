@@ -1900,12 +1900,17 @@ fn the_medium_is_refused_with_the_papers_method() {
 /// - the tilt: per sphere the slope K of the tally's law over T(μ)/(π c), θ 0–80°, μ 0.2–1
 ///   (r = A (1 + K (μ̄ − μ)), weighted by μ), then K = s (k₀ + k₁ s + k₂ (η − 1.45) +
 ///   k₃ (α − 0.1)) by least squares, against the committed law's
-///   (`model::exit_tilt::COEFFICIENTS`) and the constant 0.11 the model held until 2026-12-09.
+///   (`model::exit_tilt::COEFFICIENTS`) and the constant 0.11 the model held until 2026-12-09;
+///   the committed law's mean departure per sphere size, and the law with a fifth term
+///   s k₄ ln(σt′R/25).
 ///
 /// Measured (2026-12-08): the level from 0.777 to 1.013 over the nodes, the committed table
 /// the same to 5e-5 (its four decimals); the tilt k = [0.539, −0.312, −0.606, 0.774], rms 0.0125
 /// about slopes of 0.01–0.34, where the constant 0.11 leaves 0.083 (at 400 000 photons a
-/// sphere, 2026-12-07: [0.593, −0.405, −0.663, 0.707], rms 0.018 and 0.085).
+/// sphere, 2026-12-07: [0.593, −0.405, −0.663, 0.707], rms 0.018 and 0.085). Again on
+/// 2026-12-09: the committed law's rms 0.0125, its mean departure −0.0030, −0.0005 and +0.0001
+/// at σt′R 7.5, 25 and 105; with the size term k₄ = −0.0004 and the rms the same: the tilt does
+/// not follow the sphere's size.
 #[test]
 #[ignore = "by hand: cargo test --release --test it -- --ignored medium::rough_level_and_exit_tilt_against_the_photon_tally --nocapture"]
 fn rough_level_and_exit_tilt_against_the_photon_tally() {
@@ -1934,7 +1939,14 @@ fn rough_level_and_exit_tilt_against_the_photon_tally() {
                     line.push(format!("{level:.4}"));
                     let s = (1.0 - m.reduced_albedo()).sqrt();
                     let committed = tilt(m.reduced_albedo(), eta, alpha).k;
-                    rows.push((s, eta, alpha, law_slope(&t.angular(0, 80), &bd), committed));
+                    rows.push((
+                        s,
+                        eta,
+                        alpha,
+                        law_slope(&t.angular(0, 80), &bd),
+                        committed,
+                        k,
+                    ));
                 }
                 table += &format!("            [{}],\n", line.join(", "));
             }
@@ -1961,6 +1973,34 @@ fn rough_level_and_exit_tilt_against_the_photon_tally() {
         rms(&|i| fitted[i]),
         rms(&|i| rows[i].4),
         rms(&|_| 0.11)
+    );
+    // The committed law's bias per sphere size, and the law with a term in ln(σt′R/25).
+    for (k, st_r) in SIGMA_T_RADII.iter().enumerate() {
+        let own: Vec<f64> = (0..n)
+            .filter(|&i| rows[i].5 == k)
+            .map(|i| rows[i].3 - rows[i].4)
+            .collect();
+        let mean = own.iter().sum::<f64>() / own.len() as f64;
+        println!("σt′R {st_r}: the tally's slope less the committed law's, mean {mean:+.4}");
+    }
+    let x5 = DMatrix::from_fn(n, 5, |i, j| {
+        let (s, eta, alpha, .., k) = rows[i];
+        s * [
+            1.0,
+            s,
+            eta - 1.45,
+            alpha - 0.1,
+            (SIGMA_T_RADII[k] / 25.0).ln(),
+        ][j]
+    });
+    let k5 = least_squares(x5.clone(), DVector::from_fn(n, |i, _| rows[i].3));
+    let fitted5 = &x5 * &k5;
+    println!(
+        "with s k₄ ln(σt′R/25): k = {:?}, rms {:.4}",
+        k5.iter()
+            .map(|v| (v * 1e4).round() / 1e4)
+            .collect::<Vec<_>>(),
+        rms(&|i| fitted5[i])
     );
 }
 
