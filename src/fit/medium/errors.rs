@@ -20,7 +20,10 @@ use nalgebra::{DMatrix, DVector};
 /// the medium's own outlines weigh the rim by its contrast (`detect::silhouette::EdgeWeights`),
 /// the same sessions' errors are σa −5.6 to +3.7% and σs′ +1.9 to +8.4% (docs/medium.md, "Each
 /// model its own outlines"): the terms are about twice what they need, and are kept while the
-/// jade-like fits lean on them.
+/// jade-like fits lean on them. With the surface's reflection and the exit's tilt in the model
+/// (2026-12-08 and 09) the pixels' η on the same eight is −0.013 to +0.007 (rms 0.006), so η's
+/// term is ten times what they need; measured, not changed (docs/medium.md, "η: the pixels'
+/// own against the combination").
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
 /// terms on σa and σs′ are scaled by [`misfit`] (as a scale factor widens measurements that

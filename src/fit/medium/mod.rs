@@ -260,10 +260,13 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 ///    quadrature (the mean's error widened by √χ² when the two disagree beyond their errors),
 ///    and σa, σs′ fitted again from the first stage's.
 ///
-/// The pixels alone pull η by more than its statistical error says (0.04–0.10 low on the
+/// The pixels alone pulled η by more than its statistical error says (0.04–0.10 low on the
 /// physically based wax and soap renders, where the joint fit's η is within 0.03), so their
 /// say on η is capped at the model's error; where the joint fit leaves η undetermined (jade's
-/// lobe: ± 0.07–0.4) the pixels' η prevails. η's stated error is the combination's, and it is
+/// lobe: ± 0.07–0.4) the pixels' η prevails. (Since the surface's reflection and the exit's
+/// tilt entered the model, 2026-12-08 and 09, the pixels' η is within 0.013 on those renders
+/// and the joint fit's −0.030 to +0.008: docs/medium.md, "η: the pixels' own against the
+/// combination", measured, the combination kept.) η's stated error is the combination's, and it is
 /// carried into σa and σs′ by their sensitivity to η (docs/medium.md, "The medium fit"), and so
 /// are the held light's and outlines' errors, where `held` gives them: directly, and through
 /// the pixels' η, which they move, and its share of the combination (docs/medium.md, "The held
