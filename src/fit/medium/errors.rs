@@ -22,7 +22,8 @@ use nalgebra::{DMatrix, DVector};
 /// model its own outlines"): the terms are about twice what they need, and are kept while the
 /// jade-like fits lean on them. With the surface's reflection and the exit's tilt in the model
 /// (2026-12-08 and 09) the pixels' η on the same eight is −0.013 to +0.007 (rms 0.006), so η's
-/// term is ten times what they need; measured, not changed (docs/medium.md, "η: the pixels'
+/// term is ten times what they need, but the jade-like renders' pixels' η, up to 0.070 off,
+/// need about the present term to be covered; not changed (docs/medium.md, "η: the pixels'
 /// own against the combination").
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
