@@ -220,10 +220,11 @@ fn flux_at(
 
 /// [`predicted`] from the atlas's profile and exit law, with `gradient` its derivatives in the
 /// atlas's coordinates (x, y, η, ln α): the same product, each factor differentiated (without,
-/// zeros).
+/// zeros). `tilt` is the exit law's for this medium and roughness α ([`exit_tilt::tilt`], the
+/// same for every pixel of a channel).
 fn predicted_with_gradient(
     e: f64,
-    (medium, alpha): (&Medium, f64),
+    (medium, alpha, tilt): (&Medium, f64, &exit_tilt::Tilt),
     radius_mm: f64,
     law: &ExitLaw,
     profile: &Profile,
@@ -233,7 +234,6 @@ fn predicted_with_gradient(
     let at = Tabulated::locate(px.cos_theta);
     let (m, log_slope) = profile.value.at_node(at);
     let (flux, g, dk_dy) = flux_at(medium, radius_mm, log_slope, px);
-    let tilt = exit_tilt::tilt(medium.reduced_albedo(), medium.eta, alpha);
     let (l, dl_deta, dl_dalpha, dl_dk) = law.at(px.cos_phi, tilt.k);
     let scale = e * l;
     let lobe = surface(px, alpha, medium.eta);
@@ -333,6 +333,9 @@ impl<'a> Problem<'a> {
     fn evaluate(&self, gradient: bool) -> (DVector<f64>, Vec<[f64; 4]>) {
         let (media, irradiance) = media(self.u.as_slice(), self.setup);
         let alpha = roughness(self.u.as_slice(), self.setup);
+        let tilts = media
+            .each_ref()
+            .map(|m| exit_tilt::tilt(m.reduced_albedo(), m.eta, alpha));
         let mut out = DVector::zeros(self.rows());
         let mut grad = vec![[0.0; 4]; if gradient { self.pixel_rows() } else { 0 }];
         for (r, radius) in self.radii.iter().enumerate() {
@@ -342,7 +345,7 @@ impl<'a> Problem<'a> {
                 for (k, px) in radius.pixels[c].iter().enumerate() {
                     let (pred, g) = predicted_with_gradient(
                         irradiance[c],
-                        (&media[c], alpha),
+                        (&media[c], alpha, &tilts[c]),
                         radius.radius_mm,
                         &self.law,
                         profile,
