@@ -21,7 +21,7 @@ pub struct Silhouette {
     pub edge_points: usize,
     pub inlier_px: Vec<Vector2<f64>>,
     /// The outline drawn for the medium fit (the rim weighed by its contrast too,
-    /// [`crate::detect::silhouette::EdgeWeights::Contrast`]), where it was asked for.
+    /// [`crate::detect::silhouette::EdgeModel::Medium`]), where it was asked for.
     pub medium: Option<MediumOutline>,
 }
 

@@ -26,7 +26,7 @@ pub use found::{Found, MediumOutline, Silhouette};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
-use silhouette::{blobs, EdgeWeights, Plane};
+use silhouette::{blobs, EdgeModel, Plane};
 use std::path::{Path, PathBuf};
 
 /// The band of pixels the edge model fits: this far inside and outside the silhouette (px).
@@ -465,23 +465,24 @@ impl Photo<'_> {
         })
     }
 
-    /// The RANSAC outline `start` refined on the edge model with the noise weights (kept where
-    /// it stays within 5% of the radius, else `start`), and, where the medium was asked for,
-    /// refined from the same start with the contrast weights too ([`MediumOutline`]; where that
-    /// fails, the noise-weighted outline). From the noise-weighted outline instead, jade-3's
-    /// radius error grows from −0.15 to −0.20 px: the sector weights are the start's. None where
-    /// the noise-weighted refinement fails.
+    /// The RANSAC outline `start` refined on the shared edge model ([`EdgeModel::Shared`]; kept
+    /// where it stays within 5% of the radius, else `start`), and, where the medium was asked
+    /// for, refined from the same start on the medium's ([`EdgeModel::Medium`], a
+    /// [`MediumOutline`]; where that fails, the shared one). Started from the shared outline
+    /// instead, the medium's (then its contrast weights alone) put jade-3's radius 0.20 px small
+    /// instead of 0.15: the sector weights are the start's. None where the shared refinement
+    /// fails.
     fn refined(
         &self,
         start: &Outline,
     ) -> Option<(silhouette::Refined, Outline, Option<MediumOutline>)> {
-        let refine = |weights| {
+        let refine = |model| {
             silhouette::refine_repeated(
                 &[(self.lum, Some(&self.img.saturated))],
                 self.proj,
                 start,
                 (BAND_INNER_PX, BAND_OUTER_PX),
-                weights,
+                model,
             )
         };
         // The refinement may not wander off: it starts within a pixel of the edges.
@@ -493,9 +494,9 @@ impl Photo<'_> {
                 *start
             }
         };
-        let refined = refine(EdgeWeights::Noise)?;
+        let refined = refine(EdgeModel::Shared)?;
         let outline = kept(&refined);
-        let medium = self.medium.then(|| match refine(EdgeWeights::Contrast) {
+        let medium = self.medium.then(|| match refine(EdgeModel::Medium) {
             Some(r) => MediumOutline {
                 outline: kept(&r),
                 std_px: r.std_px,
@@ -528,7 +529,7 @@ pub(crate) fn pool_static_spheres(
     }
     for j in 0..first.len() {
         let outlines: Vec<Outline> = per_image.iter().map(|(_, _, fs)| fs[j].outline).collect();
-        if let Some((joint, n)) = pooled(per_image, &outlines, proj, EdgeWeights::Noise) {
+        if let Some((joint, n)) = pooled(per_image, &outlines, proj, EdgeModel::Shared) {
             for (_, _, fs) in per_image.iter_mut() {
                 let f = &mut fs[j];
                 f.outline = joint.outline;
@@ -542,7 +543,7 @@ pub(crate) fn pool_static_spheres(
             .map(|(_, _, fs)| fs[j].medium.map(|m| m.outline))
             .collect();
         if let Some((joint, _)) =
-            medium.and_then(|o| pooled(per_image, &o, proj, EdgeWeights::Contrast))
+            medium.and_then(|o| pooled(per_image, &o, proj, EdgeModel::Medium))
         {
             for (_, _, fs) in per_image.iter_mut() {
                 fs[j].medium = Some(MediumOutline {
@@ -562,7 +563,7 @@ fn pooled(
     per_image: &[(&LinearRgb, Plane, Vec<Silhouette>)],
     outlines: &[Outline],
     proj: &Projection,
-    weights: EdgeWeights,
+    model: EdgeModel,
 ) -> Option<(silhouette::Refined, usize)> {
     let medoid = outlines.iter().min_by(|a, b| {
         let da: f64 = outlines.iter().map(|o| a.distance_px(o, proj)).sum();
@@ -582,13 +583,8 @@ fn pooled(
         .filter(|(_, &a)| a)
         .map(|((img, lum, _), _)| (lum, Some(img.saturated.as_slice())))
         .collect();
-    let joint = silhouette::refine_repeated(
-        &images,
-        proj,
-        medoid,
-        (BAND_INNER_PX, BAND_OUTER_PX),
-        weights,
-    )?;
+    let joint =
+        silhouette::refine_repeated(&images, proj, medoid, (BAND_INNER_PX, BAND_OUTER_PX), model)?;
     (joint.outline.distance_px(medoid, proj) <= 2.0).then_some((joint, images.len()))
 }
 

@@ -19,8 +19,9 @@
 //!    fitted Gaussian blur (5-point Gauss–Hermite). The per-sector terms are linear and solved in
 //!    closed form (variable projection); Levenberg–Marquardt ([`crate::lm`]) moves the three
 //!    outline parameters and the blur. Sectors that the model does not explain (a terminator
-//!    crossing the band) are down-weighted by their own residual; for the medium's outlines
-//!    ([`EdgeWeights::Contrast`]) dim stretches of rim by their contrast as well.
+//!    crossing the band) are down-weighted by their own residual. The medium's outlines
+//!    ([`EdgeModel::Medium`]) weigh dim stretches of rim by their contrast as well and leave the
+//!    T(φ)·cos φ term out.
 
 use crate::camera::outline::{Outline, Projection};
 use crate::formats::photo::Raster;
@@ -29,16 +30,31 @@ use nalgebra::{Matrix3, Vector2, Vector3};
 /// A single-channel floating-point image (luminance).
 pub type Plane = Raster<f32>;
 
-/// How the edge model weighs the rim's angular sectors: by their residual's noise alone
-/// (`Noise`: the outlines the highlights, the light and the CDRF use), or also by their rim's
-/// contrast (`Contrast`: the outlines drawn for the medium fit, since a dim stretch of a
-/// translucent sphere's rim draws the outline inward; docs/measurements/detection.md, "Each
-/// sector weighted by its rim's contrast").
+/// Which edge model draws an outline.
+///
+/// - `Shared`: the outlines every detection draws, which the highlights, the light and the CDRF
+///   use: the rim's angular sectors weighed by their residual's noise alone, inside the rim a
+///   step, cos φ, T(φ) and T(φ)·cos φ.
+/// - `Medium`: the outlines drawn for the medium fit. Each sector is also weighed by its rim's
+///   contrast, since a dim stretch of a translucent sphere's rim draws the outline inward
+///   (docs/measurements/detection.md, "Each sector weighted by its rim's contrast"). And the
+///   T(φ)·cos φ term is left out: within the band it is nearly a sum of the others, so the
+///   outline slid along its radius at little cost and came out small (on the eleven physically
+///   based sessions the sessions' mean radius error RMS 0.063 → 0.020 px, each sphere's scatter
+///   0.089 → 0.047 px; docs/measurements/detection.md, "The medium's outlines without the limb's
+///   T(φ)·cos φ term").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum EdgeWeights {
+pub enum EdgeModel {
     #[default]
-    Noise,
-    Contrast,
+    Shared,
+    Medium,
+}
+
+impl EdgeModel {
+    /// Whether the model has the T(φ)·cos φ term inside the rim.
+    fn t_cos(self) -> bool {
+        self == EdgeModel::Shared
+    }
 }
 
 impl Raster<f32> {
@@ -312,23 +328,23 @@ pub(crate) fn ransac(
     })
 }
 
-/// The edge model's own error on an outline (px), beyond the error it states
-/// ([`Refined::std_px`]), measured on the physically based wax and soap renders (the two
-/// bundled sessions and the six of `datasets/pbr-seeds`, 40 spheres; docs/medium.md, "The
-/// outlines' error carried"): the outlines' centres and radii against truth.json's scatter
-/// within a session by 0.055–0.079 px where their stated std is 0.063–0.074 px (the
-/// `independent` part, in quadrature with the stated one), and each session's mean is off by
-/// 0.032–0.041 px in the centre and 0.077 px in the radius (RMS over sessions; radii drawn
-/// small on 33 of 40 spheres) where the stated std over five spheres gives 0.03: the `common`
-/// parts, shared by every sphere of a session (the same material, camera and light). With the
-/// rim weighed by its contrast ([`EdgeWeights::Contrast`], the medium's outlines) the same
-/// sessions' means are off by 0.035 and 0.023 px in the centre and 0.046 px in the radius
-/// (`scripts/outline-errors.sh --model medium`): within these terms but the centre's first coordinate, 17%
-/// above its 0.03.
+/// The edge model's own error on a medium's outline ([`EdgeModel::Medium`], px), beyond the
+/// error it states ([`Refined::std_px`]), measured on the physically based wax and soap renders
+/// (the two bundled sessions and the six of `datasets/pbr-seeds`, 40 spheres;
+/// `scripts/outline-errors.sh --model medium`; docs/measurements/detection.md, "The medium's
+/// outlines without the limb's T(φ)·cos φ term"): the outlines' centres and radii against
+/// truth.json's scatter within a session by 0.029–0.038 px where their stated std is
+/// 0.057–0.071 px RMS, but a few spheres state 0.006–0.02 px, and |error|/std has an RMS of
+/// 1.27 in the centre's first coordinate: 0.97 with the `independent` part in quadrature. Each
+/// session's mean is off by 0.016–0.020 px (RMS over sessions), about what five spheres'
+/// scatter gives (0.014–0.019): the `common` parts, shared by every sphere of a session (the
+/// same material, camera and light), hold that much. (With the T(φ)·cos φ term the means were
+/// off by 0.035 px in the centre and 0.046–0.077 px in the radius, and the terms were 0.05,
+/// 0.03 and 0.07 px.)
 pub const EDGE_MODEL_ERROR: EdgeModelError = EdgeModelError {
-    independent: 0.05,
-    common_centre: 0.03,
-    common_radius: 0.07,
+    independent: 0.02,
+    common_centre: 0.02,
+    common_radius: 0.02,
 };
 
 /// The edge model's own error per outline coordinate (px): [`EDGE_MODEL_ERROR`].
@@ -372,7 +388,8 @@ const LIMB_ETA: f64 = 1.44;
 /// Linear terms per sector: background, step, cos φ, the exit transmission T(φ), T(φ)·cos φ, and
 /// a background ramp (distance outside the rim).
 /// Near the rim cos θ is linear in cos φ, so an opaque sphere's radiance is a + b·cos φ and a
-/// translucent one's T(φ)·(a + b·cos φ).
+/// translucent one's T(φ)·(a + b·cos φ). The medium's edge model ([`EdgeModel::Medium`]) leaves
+/// T(φ)·cos φ out (its feature 0).
 const NBASE: usize = 6;
 /// Each base term also varies linearly with the angle along the rim within its sector (the
 /// brightness changes along the rim toward the terminator).
@@ -404,6 +421,9 @@ struct BandPixel {
 /// The band of every photo: each pixel's place's sub-sample rays and angle from its sector's
 /// middle (in sector widths, −½ … ½), once for all photos, and the photos' pixels.
 struct Band {
+    /// Whether the edge model has its T(φ)·cos φ term ([`EdgeModel::t_cos`]); without it that
+    /// feature is 0 and the ridge of [`band_residuals`] gives it no weight.
+    t_cos: bool,
     rays: Vec<([Vector3<f64>; SUB * SUB], f64)>,
     pixels: Vec<BandPixel>,
 }
@@ -427,14 +447,15 @@ fn limb_transmission(u: f64) -> f64 {
 }
 
 /// Linear features of a band pixel under an outline and blur ([`NBASE`] terms and their linear
-/// variation along the rim): the means of coverage, cos φ, T(φ) and T(φ)·cos φ, and the
-/// background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread radially by the blur
+/// variation along the rim): the means of coverage, cos φ, T(φ) and T(φ)·cos φ (0 without
+/// `t_cos`), and the background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread radially by the blur
 /// (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial offset δ px as s − δ/R.
 fn features(
     o: &Outline,
     (q, dpsi): &([Vector3<f64>; SUB * SUB], f64),
     r_px: f64,
     blur: f64,
+    t_cos: bool,
 ) -> Lin {
     let mut f = Lin::zeros();
     f[0] = 1.0;
@@ -469,7 +490,9 @@ fn features(
                 f[1] += w;
                 f[2] += w * u;
                 f[3] += w * t;
-                f[4] += w * t * u;
+                if t_cos {
+                    f[4] += w * t * u;
+                }
             }
         }
     }
@@ -497,7 +520,7 @@ fn band_residuals(
     let at: Vec<Lin> = band
         .rays
         .par_iter()
-        .map(|r| features(o, r, r_px, blur))
+        .map(|r| features(o, r, r_px, blur, band.t_cos))
         .collect();
     let band = &band.pixels;
     let feats = || band.iter().map(|p| &at[p.at]);
@@ -596,6 +619,7 @@ fn band_pixels(
     images: &[(&Plane, Option<&[bool]>)],
     geo: &[BandGeometry],
     nsec: usize,
+    t_cos: bool,
 ) -> Option<Band> {
     let (width, height) = (images[0].0.width, images[0].0.height);
     let mut pixels = vec![];
@@ -615,11 +639,15 @@ fn band_pixels(
         }
     }
     let rays = geo.iter().map(|(_, _, _, q, dpsi)| (*q, *dpsi)).collect();
-    Some(Band { rays, pixels })
+    Some(Band {
+        t_cos,
+        rays,
+        pixels,
+    })
 }
 
 /// Sector weights from the starting fit: 1/rms², the rms floored at the median (a sector of
-/// pure noise is not more trustworthy than the typical one), under [`EdgeWeights::Contrast`]
+/// pure noise is not more trustworthy than the typical one), under [`EdgeModel::Medium`]
 /// times the sector's rim contrast over its photo's largest ([`sector_contrast`]); 0 for a sector
 /// without its terms. The contrast factor: a dim stretch of rim (the unlit side's limb, which the
 /// light scattered round a translucent sphere brightens, and the terminator crossing it) draws
@@ -634,15 +662,15 @@ fn sector_weights(
     band: &Band,
     (sectors, nsec): (usize, usize),
     r_px: f64,
-    weights: EdgeWeights,
+    model: EdgeModel,
 ) -> Option<Vec<f64>> {
     let (_, rms0) = band_residuals(start, 0.0, band, sectors, r_px);
     let mut finite: Vec<f64> = rms0.iter().cloned().filter(|v| v.is_finite()).collect();
     finite.sort_by(|a, b| a.total_cmp(b));
     let floor = finite.get(finite.len() / 2)?.max(1e-12);
-    let contrast = match weights {
-        EdgeWeights::Contrast => sector_contrast(start, band, (sectors, nsec), r_px),
-        EdgeWeights::Noise => vec![1.0; sectors],
+    let contrast = match model {
+        EdgeModel::Medium => sector_contrast(start, band, (sectors, nsec), r_px),
+        EdgeModel::Shared => vec![1.0; sectors],
     };
     Some(
         rms0.iter()
@@ -882,7 +910,7 @@ pub(crate) fn refine(
     proj: &Projection,
     start: &Outline,
     (inner_px, outer_px): (f64, f64),
-    weights: EdgeWeights,
+    model: EdgeModel,
 ) -> Option<Refined> {
     let r_px = start.radius_px(proj);
     if images.is_empty() {
@@ -902,12 +930,12 @@ pub(crate) fn refine(
         nsec,
         (inner_px, outer_px),
     );
-    let band = band_pixels(images, &geo, nsec)?;
+    let band = band_pixels(images, &geo, nsec, model.t_cos())?;
     let sectors = images.len() * nsec;
     if band.pixels.len() < 50 {
         return None;
     }
-    let w = sector_weights(start, &band, (sectors, nsec), r_px, weights)?;
+    let w = sector_weights(start, &band, (sectors, nsec), r_px, model)?;
     let sectors_used = w.iter().filter(|&&v| v > 0.0).count();
     let wpix: Vec<f64> = band.pixels.iter().map(|p| w[p.sector]).collect();
     let unit = start.pixel_unit(proj);
@@ -960,11 +988,11 @@ pub(crate) fn refine_repeated(
     proj: &Projection,
     start: &Outline,
     band: (f64, f64),
-    weights: EdgeWeights,
+    model: EdgeModel,
 ) -> Option<Refined> {
-    let mut r = refine(images, proj, start, band, weights)?;
+    let mut r = refine(images, proj, start, band, model)?;
     for _ in 0..3 {
-        let next = refine(images, proj, &r.outline, band, weights)?;
+        let next = refine(images, proj, &r.outline, band, model)?;
         let moved = next.outline.distance_px(&r.outline, proj);
         r = next;
         if moved < 0.01 {

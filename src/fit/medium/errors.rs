@@ -17,14 +17,16 @@ use nalgebra::{DMatrix, DVector};
 /// lies within 1.5 of its stated error; the jade-like renders, not used to set them, test them.
 /// Since the deepest shadow left the fit, the beams follow the transmitted light's mean
 /// direction, the pixels' noise is measured as a curve in the level ([`crate::fit::noise`]) and
-/// the medium's own outlines weigh the rim by its contrast (`detect::silhouette::EdgeWeights`),
+/// the medium's own outlines weigh the rim by its contrast (`detect::silhouette::EdgeModel`),
 /// the same sessions' errors are σa −5.6 to +3.7% and σs′ +1.9 to +8.4% (docs/medium.md, "Each
 /// model its own outlines"): the terms are about twice what they need, and are kept while the
 /// jade-like fits lean on them. With the surface's reflection and the exit's tilt in the model
 /// (2026-12-08 and 09) the pixels' η on the same eight is −0.013 to +0.007 (rms 0.006), so η's
 /// term is ten times what they need, but the jade-like renders' pixels' η, up to 0.070 off,
 /// need about the present term to be covered; not changed (docs/medium.md, "η: the pixels'
-/// own against the combination").
+/// own against the combination"). With the medium's outlines on their own edge model
+/// (2026-12-07, latest) the jade seeds' pixels' η is within 0.009 and pbr-jade's 0.060 off
+/// (docs/medium.md, "The medium's outlines without the limb's T(φ)·cos φ term").
 ///
 /// Where the model misses the photos by more than their noise, the misfit is the model's: the
 /// terms on σa and σs′ are scaled by [`misfit`] (as a scale factor widens measurements that
