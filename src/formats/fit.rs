@@ -238,6 +238,11 @@ pub struct ValueJson {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EtaSourcesJson {
     pub joint: ValueJson,
+    /// Whether the joint fit's η was combined with the pixels' (false: left out, its model not
+    /// describing the photos, and the medium's η is the pixels'); absent in files written
+    /// before it could be left out (it was always combined).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_combined: Option<bool>,
     pub pixels: ValueJson,
 }
 

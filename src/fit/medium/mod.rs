@@ -159,6 +159,9 @@ pub struct EtaSources {
     /// The joint fit's (the highlights and the CDRF's transmissions), its std with
     /// [`JOINT_ETA_ERROR`] and its α's difference from the medium's (`joint_eta_std`).
     pub joint: (f64, f64),
+    /// Whether the joint fit's η was combined with the pixels' ([`Setup::joint_eta_combined`]);
+    /// where not, the medium's η is the pixels'.
+    pub joint_combined: bool,
     /// The medium's pixels with σa and σs′ free, its std with the model's own error.
     pub pixels: (f64, f64),
 }
@@ -258,7 +261,8 @@ pub const START_ALBEDOS: [f64; 8] = [0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.
 ///    widened where the first stage's α differs from the lobe's it rests on) and the first
 ///    stage's, whose error is its statistical one and the model's own ([`MODEL_ERROR`]'s η) in
 ///    quadrature (the mean's error widened by √χ² when the two disagree beyond their errors),
-///    and σa, σs′ fitted again from the first stage's.
+///    or at the first stage's alone where the joint fit's model does not describe the photos
+///    (`setup.joint_eta_combined`), and σa, σs′ fitted again from the first stage's.
 ///
 /// The pixels alone pulled η by more than its statistical error says (0.04–0.10 low on the
 /// physically based wax and soap renders, where the joint fit's η is within 0.03), so their
@@ -289,7 +293,16 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         setup.eta_prior.0,
         joint_eta_std(setup, problem::roughness(free.0.u.as_slice(), setup)),
     );
-    let combined = crate::stats::inverse_variance_mean(&[joint, (eta_px, eta_px_std)]);
+    // Left out (an infinite std: no weight) where the joint fit does not describe the photos.
+    let joint_weighed = (
+        joint.0,
+        if setup.joint_eta_combined {
+            joint.1
+        } else {
+            f64::INFINITY
+        },
+    );
+    let combined = crate::stats::inverse_variance_mean(&[joint_weighed, (eta_px, eta_px_std)]);
     let eta = match combined {
         (v, s) if v.is_finite() && s.is_finite() => (v, s),
         _ => setup.eta_prior,
@@ -311,7 +324,7 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
     let eta_sensitivity = errors.eta_sensitivity.clone();
     let eta_path = (combined.0.is_finite() && combined.1.is_finite())
         .then(|| {
-            let share = pixels_share(joint.1, eta_px_std) * eta_minus_one / (eta.0 - 1.0);
+            let share = pixels_share(joint_weighed.1, eta_px_std) * eta_minus_one / (eta.0 - 1.0);
             errors::EtaPath::new(&free.0, share, &eta_sensitivity)
         })
         .flatten();
@@ -349,6 +362,7 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         at_bounds: problem::at_bounds(&p, setup),
         eta_sources: EtaSources {
             joint,
+            joint_combined: setup.joint_eta_combined,
             pixels: (eta_px, eta_px_std),
         },
         restarted_from: restarted,

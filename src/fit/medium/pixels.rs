@@ -11,6 +11,10 @@ pub struct Setup {
     pub light: Vector3<f64>,
     /// η's prior: the joint fit's η and its std.
     pub eta_prior: (f64, f64),
+    /// Whether the joint fit's η joins the pixels' in the medium's ([`super::fit`]): false where
+    /// the joint fit's model does not describe the photos (its residuals more than twice their
+    /// noise), so that its η's error is its model's bias more than its noise.
+    pub joint_eta_combined: bool,
     /// How the joint fit's η follows its α: Σ_ηα/Σ_αα of its covariance (0 where it states
     /// none). A clipped highlight's wings hold F(η)·α², so a polished surface's η rests on its
     /// lobe's α, and the medium's measured α moves it ([`super::fit`]).

@@ -504,6 +504,7 @@ pub(super) mod tests {
         let setup = Setup {
             light: Vector3::z(),
             eta_prior: (1.44, 0.05),
+            joint_eta_combined: true,
             eta_alpha_slope: 0.0,
             alpha: 0.11,
             alpha_std: Some(0.03),
