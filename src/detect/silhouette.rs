@@ -448,8 +448,9 @@ fn limb_transmission(u: f64) -> f64 {
 
 /// Linear features of a band pixel under an outline and blur ([`NBASE`] terms and their linear
 /// variation along the rim): the means of coverage, cos φ, T(φ) and T(φ)·cos φ (0 without
-/// `t_cos`), and the background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread radially by the blur
-/// (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial offset δ px as s − δ/R.
+/// `t_cos`), and the background ramp, over the pixel's 2×2 sub-samples, each sub-sample spread
+/// radially by the blur (Gauss–Hermite). cos φ = √(1 − s²) inside, with s moved by a radial
+/// offset δ px as s − δ/R.
 fn features(
     o: &Outline,
     (q, dpsi): &([Vector3<f64>; SUB * SUB], f64),
