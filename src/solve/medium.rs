@@ -151,7 +151,7 @@ fn alpha_prior_std(outcome: &Outcome) -> Option<f64> {
 /// at which it says it does not (`fit::joint::checks::CHI2_WARN`, residuals twice their noise).
 /// Where it does not, its η is not combined with the medium's pixels' ([`Setup`]'s
 /// `joint_eta_combined`): on the jade-like renders, whose highlights clip, the joint fit's
-/// residuals are 2.3–10.8 times the noise and its η 0.1–0.3 low, 1.1–1.8 of its std, though
+/// residuals are 2.3–10.8 times the noise and its η 0.1–0.3 low, 0.5–1.8 of its std, though
 /// that std is already widened by the misfit (docs/medium.md, "The joint fit's η left out where
 /// its model misses the photos").
 fn joint_describes_the_photos(outcome: &Outcome) -> bool {
