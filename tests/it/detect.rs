@@ -692,9 +692,9 @@ fn outline_mean_errors(dir: &Path, medium: bool) -> [f64; 2] {
 /// (with the contrast weights alone 0.05 and 0.04 px; docs/measurements/detection.md, "Each
 /// sector weighted by its rim's contrast" and "The medium's outlines without the limb's
 /// T(φ)·cos φ term"). Asserted against truth.json: the medium's outlines' mean radius and centre
-/// errors within 0.06 px, the shared ones' beyond 0.1 px; those (what the highlights, the light and the CDRF
-/// use) the same whichever model asked, to the bit; only the medium's detections hold the
-/// medium's outlines; and `solve --model medium` detects again over the CDRF's detections, then
+/// errors within 0.06 px, the shared ones' beyond 0.1 px; those (what the highlights, the light
+/// and the CDRF use) the same whichever model asked, to the bit; only the medium's detections
+/// hold the medium's outlines; and `solve --model medium` detects again over the CDRF's detections, then
 /// reuses its own.
 #[test]
 fn the_medium_draws_its_outlines_on_its_own_edge_model() {

@@ -1170,8 +1170,8 @@ fn the_medium_of_the_soap_renders() {
 /// reflection was in the medium model (2026-12-08) its first stage ran to the walls of its range
 /// and was started again (`fit::medium`'s second start), and the fit ended with σs′ +24–26% and
 /// η +0.12, whose medium, path-traced, met the photos 1.91 times worse than the model (the loop
-/// open). Measured now (2026-12-07, latest: the medium's outlines without the edge model's T(φ)·cos φ
-/// term; 15 mm held out): σa +6.3, +6.2, +6.0%, σs′ +1.9, +1.9, +2.1%, η 1.578 ± 0.071, every
+/// open). Measured now (2026-12-07, latest: the medium's outlines without the edge model's
+/// T(φ)·cos φ term; 15 mm held out): σa +6.3, +6.2, +6.0%, σs′ +1.9, +1.9, +2.1%, η 1.578 ± 0.071, every
 /// error within 0.49 of its std, residuals 1.04 of the noise, the first stage inside its range;
 /// `close-loop` at 1024 spp and 400 pixels a sphere 1.06 (3.47 ± 0.12% against the model's
 /// 3.27%; the build before 0.94). At 256 spp the render's own noise, 6.3%, was twice the
@@ -1265,8 +1265,9 @@ fn close_loop(fit: &Path, args: &[&str]) -> (workbench::synth::close_loop::Close
 /// on their own edge model (2026-12-07, latest): α 0.049 ± 0.012, σa −1.0, +2.5, −1.1%, σs′
 /// −2.6, +3.4, −2.3%, η 1.674 ± 0.075, within 0.72; with the joint fit's η left out where its
 /// model misses the photos (the same day; its residuals 9.0 times the noise): α 0.049 ± 0.012,
-/// σa −1.7, +1.6, −1.8%, σs′ −2.0, +4.1, −1.7%, η 1.680 ± 0.076, within 0.79. Asserted: α within 0.015 of the truth (the lobe's is 0.08 off), σa and σs′ within the
-/// issue's 10%, each error within 1.5 of its stated std.
+/// σa −1.7, +1.6, −1.8%, σs′ −2.0, +4.1, −1.7%, η 1.680 ± 0.076, within 0.79. Asserted: α
+/// within 0.015 of the truth (the lobe's is 0.08 off), σa and σs′ within the 10%, each
+/// error within 1.5 of its stated std.
 #[test]
 fn the_bundled_jade_is_measured_with_its_roughness() {
     let Some(data) = common::shared_data() else {
