@@ -381,18 +381,22 @@ fn shading_refit(
     x: Vector3<f64>,
     ss_image: f64,
 ) -> Option<(Vector3<f64>, f64)> {
-    let lobe = |(x2, r, lin, _): Solution| (lin[NLIN - 1] > 0.0).then(|| (x2, r.norm_squared()));
-    let first = solve(f, pix, x).and_then(lobe);
+    let first = solve(f, pix, x).and_then(with_lobe);
     let best = match first {
         Some((_, ss)) if ss <= FAILED_REFIT * ss_image => first,
         _ => LOBE_STARTS
             .iter()
-            .filter_map(|a0| solve(f, pix, Vector3::new(x.x, x.y, a0.ln())).and_then(lobe))
+            .filter_map(|a0| solve(f, pix, Vector3::new(x.x, x.y, a0.ln())).and_then(with_lobe))
             .chain(first)
             .min_by(|a, b| a.1.total_cmp(&b.1)),
     };
     best.filter(|(_, ss)| *ss <= FAILED_REFIT * ss_image)
         .map(|(x2, _)| (f.light(&x2), x2.z.exp()))
+}
+
+/// A solution's unknowns and sum of squares, where it found a lobe (a positive amplitude).
+fn with_lobe((x2, r, lin, _): Solution) -> Option<(Vector3<f64>, f64)> {
+    (lin[NLIN - 1] > 0.0).then(|| (x2, r.norm_squared()))
 }
 
 /// The sphere's pixels as the highlight search sees them: its bounding box, the geometry of
@@ -809,9 +813,9 @@ impl<'a> Area<'a> {
         let c2 = Matrix2::new(cov3[(0, 0)], cov3[(0, 1)], cov3[(1, 0)], cov3[(1, 1)]);
         // Each alternative fit's light and roughness, when it finds a lobe.
         let refit = |f: &Fit, pix: &[Px]| {
-            solve(f, pix, x).and_then(|(x2, _, lin, _)| {
-                (lin[NLIN - 1] > 0.0).then(|| (f.light(&x2), x2.z.exp()))
-            })
+            solve(f, pix, x)
+                .and_then(with_lobe)
+                .map(|(x2, _)| (f.light(&x2), x2.z.exp()))
         };
         let dof = npix.saturating_sub(NLIN + 3).max(1) as f64;
         let shading = shading_refit(
