@@ -50,7 +50,8 @@ pub(crate) enum Command {
     Render(RenderArgs),
     /// A static page that shows a fit's material in the browser (WebGL2): a sphere row and a mesh.
     View(ViewArgs),
-    /// Write a fit's measured medium (`solve --model medium`) for Mitsuba, pbrt, Blender or Unreal.
+    /// Write a fit's measured medium (`solve` with the irradiance known, or `--model medium`) for
+    /// Mitsuba, pbrt, Blender or Unreal.
     Export(ExportArgs),
     /// Path-trace a fit's measured medium back into every sphere and compare it with the photos,
     /// beside the medium model and the CDRF (closing the loop).
@@ -73,9 +74,10 @@ pub(crate) struct DetectArgs {
     #[arg(long)]
     pub(crate) no_overlays: bool,
     /// The model the detections are for (`solve --model`): `medium` also draws each outline for
-    /// the medium (the rim weighed by its contrast too), which `solve --model medium` needs;
-    /// the outlines every model uses are the same either way.
-    #[arg(long, value_enum, default_value_t = ModelArg::Cdrf)]
+    /// the medium (the rim weighed by its contrast too), which the medium fit needs; `auto` does
+    /// where session.json names a diffuse reference (`solve`'s auto then fits the medium); the
+    /// outlines every model uses are the same either way.
+    #[arg(long, value_enum, default_value_t = ModelArg::Auto)]
     pub(crate) model: ModelArg,
 }
 
@@ -92,8 +94,10 @@ pub(crate) struct SolveArgs {
     /// Where to write fit.json (default: beside session.json).
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
-    /// The model: the CDRF alone, or then the medium (σa, σs′, η per channel) from its light.
-    #[arg(long, value_enum, default_value_t = ModelArg::Cdrf)]
+    /// The model: the CDRF alone, or then the medium (σa, σs′, η per channel) from its light;
+    /// auto: the medium where the light's irradiance is known (--irradiance, or a reference in
+    /// session.json), the CDRF alone otherwise.
+    #[arg(long, value_enum, default_value_t = ModelArg::Auto)]
     pub(crate) model: ModelArg,
     /// Fit without the spheres of this radius (mm), then report how well the fit predicts them.
     #[arg(long, allow_hyphen_values = true)]
@@ -234,7 +238,7 @@ pub(crate) enum TextureArg {
 
 #[derive(Args)]
 pub(crate) struct ExportArgs {
-    /// fit.json with a "medium" (written by `solve --model medium`).
+    /// fit.json with a "medium" (`solve` with the irradiance known, or `--model medium`).
     pub(crate) fit: PathBuf,
     /// The renderers, comma-separated: mitsuba, pbrt, blender, unreal.
     #[arg(long, value_delimiter = ',', required = true)]
@@ -246,7 +250,7 @@ pub(crate) struct ExportArgs {
 
 #[derive(Args)]
 pub(crate) struct CloseLoopArgs {
-    /// fit.json with a "medium" (written by `solve --model medium`).
+    /// fit.json with a "medium" (`solve` with the irradiance known, or `--model medium`).
     pub(crate) fit: PathBuf,
     /// The folder close-loop.json and its figure go into (default: `close-loop/` beside fit.json).
     #[arg(long)]
@@ -374,6 +378,10 @@ pub(crate) enum ModelArg {
     /// The CDRF, then σa, σs′ and η per channel by diffusion in each sphere from its light, η
     /// and lobe (fit.json's "medium"; docs/medium.md).
     Medium,
+    /// The medium where the light's irradiance is known (`--irradiance`, or a diffuse reference
+    /// in session.json) and the method is joint, the CDRF alone otherwise (docs/medium.md,
+    /// "Which model is the default").
+    Auto,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -14,13 +14,28 @@ pub(crate) fn detect(a: DetectArgs, quiet: bool) -> Result<Detected> {
         out: a.out.clone(),
         overlays: !a.no_overlays,
         quiet,
-        medium_outlines: super::solve::solve_model(a.model).medium_outlines(),
+        medium_outlines: medium_outlines(&a)?,
     };
     let d = detect::run(&opts)?;
     let out = a
         .out
         .unwrap_or_else(|| std::path::Path::new(&d.session).with_file_name("detections.json"));
     Ok(Detected { d, out })
+}
+
+/// Whether `detect --model` asks for the medium's outlines too: `auto` where session.json names
+/// a diffuse reference, as `solve`'s auto then fits the medium (`SolveModel::resolve`).
+fn medium_outlines(a: &DetectArgs) -> Result<bool> {
+    use workbench::solve::SolveModel;
+    let model = super::solve::solve_model(a.model);
+    let with_reference = model == SolveModel::Auto
+        && workbench::formats::session::Session::load(&a.session)?
+            .0
+            .reference
+            .is_some();
+    Ok(model
+        .resolve(workbench::formats::fit::Method::Joint, with_reference)
+        .medium_outlines())
 }
 
 /// What the detector found, and where it was written.

@@ -110,5 +110,6 @@ pub(crate) fn solve_model(m: ModelArg) -> workbench::solve::SolveModel {
     match m {
         ModelArg::Cdrf => workbench::solve::SolveModel::Cdrf,
         ModelArg::Medium => workbench::solve::SolveModel::Medium,
+        ModelArg::Auto => workbench::solve::SolveModel::Auto,
     }
 }

@@ -433,7 +433,7 @@ pub struct Timings {
     #[serde(default)]
     #[serde(deserialize_with = "nullable::f64")]
     pub jackknife_s: f64,
-    /// The medium fit (`--model medium`).
+    /// The medium fit (`--model medium`, or `auto` with the irradiance known).
     #[serde(default)]
     #[serde(deserialize_with = "nullable::f64")]
     pub medium_s: f64,
@@ -639,12 +639,13 @@ impl FitFile {
     }
 
     /// The fit's measured medium, for a renderer: an error naming `file` when there is none
-    /// (`solve --model medium` wrote none) or when it is not a medium (a failed fit).
+    /// (a solve without the irradiance, or `--model cdrf`, fits none) or when it is not a medium
+    /// (a failed fit).
     pub fn medium(&self, file: &Path) -> Result<&MediumJson> {
         let Some(m) = &self.medium else {
             return Err(Error::invalid(
                 file,
-                "no \"medium\" in this fit; run `workbench solve <session> --model medium` first",
+                "no \"medium\" in this fit; run `workbench solve <session> --irradiance <E>` (or `--model medium`) first",
             ));
         };
         let positive = m

@@ -82,7 +82,7 @@ fn reusable(
     }
     if medium && !d.has_medium_outlines() {
         return Err(
-            "detections.json has no outlines drawn for the medium, which --model medium needs"
+            "detections.json has no outlines drawn for the medium, which the medium fit needs"
                 .into(),
         );
     }

@@ -38,35 +38,23 @@ pub use summary::summary;
 /// Run `solve` and write fit.json (or reuse the one an identical earlier run wrote).
 pub fn run(opts: &Options) -> Result<FitFile> {
     let t0 = Instant::now();
-    let outputs: Vec<&Path> = opts
-        .out
-        .iter()
-        .chain(&opts.plots)
-        .map(|p| p.as_path())
-        .collect();
-    crate::formats::output::check_roots(&outputs)?;
-    let report = session::inspect(&opts.session)?;
-    if report.session_file.to_str().is_none() {
-        // fit.json names its session as text: a lossy name would point nowhere for `plot`.
-        return Err(crate::error::Error::invalid(
-            &report.session_file,
-            "the session's path is not valid UTF-8, which fit.json cannot record: rename the folder",
-        ));
-    }
-    let now = crate::formats::fingerprint::of_files(&report.input_files())?;
-    if let Some((mut f, out)) = cached(opts, &report, &now) {
-        f.skipped.insert(
-            0,
-            format!(
-                "solve: {} reused (its inputs unchanged by content, same options; {:.3} s instead of {:.2} s)",
-                out.display(),
-                t0.elapsed().as_secs_f64(),
-                f.timings.total_s
-            ),
-        );
+    let (report, now) = inspected(opts)?;
+    if let Some(f) = reused(opts, &report, &now, t0) {
         return Ok(f);
     }
+    // fit.json keeps the options as asked, for the reuse check (`--model auto` as such: what it
+    // stands for follows from the irradiance asked and session.json, an input).
+    let asked = load::fingerprint(opts);
+    // `--model auto` stands for the medium or the CDRF alone from here on.
+    let mut model_skipped = vec![];
+    let resolved = options::resolved(
+        opts,
+        &session::Session::load(&report.session_file)?.0,
+        &mut model_skipped,
+    );
+    let opts = &resolved;
     let mut l = load_inspected(opts, report, now, t0)?;
+    l.skipped.append(&mut model_skipped);
     // Stages after loading (detection shows its own bar): fit, predictions, output.
     let pb = crate::progress::bar(3, "solve", opts.quiet);
     pb.enable_steady_tick(std::time::Duration::from_millis(200));
@@ -76,9 +64,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
         .unwrap_or_else(|| l.report.session_file.with_file_name("fit.json"));
     check_holdout(opts, &l)?;
     medium::check(opts)?;
-    // Without --irradiance, session.json's diffuse reference gives it (fit.json keeps the options
-    // as asked, for the reuse check).
-    let asked = load::fingerprint(opts);
+    // Without --irradiance, session.json's diffuse reference gives it.
     let (reference, with_reference) = irradiance::apply(opts, &l)?;
     let opts = &with_reference;
     let is_held = |s: &SphereData| opts.holdout.is_some_and(|r| (s.radius_mm - r).abs() < 1e-9);
@@ -154,6 +140,50 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     set.commit()?;
     pb.finish_and_clear();
     Ok(fit)
+}
+
+/// The session checked, with its inputs' fingerprints; refused where the outputs' folders or the
+/// session's path cannot be written or recorded.
+fn inspected(
+    opts: &Options,
+) -> Result<(session::SessionReport, crate::formats::fingerprint::Inputs)> {
+    let outputs: Vec<&Path> = opts
+        .out
+        .iter()
+        .chain(&opts.plots)
+        .map(|p| p.as_path())
+        .collect();
+    crate::formats::output::check_roots(&outputs)?;
+    let report = session::inspect(&opts.session)?;
+    if report.session_file.to_str().is_none() {
+        // fit.json names its session as text: a lossy name would point nowhere for `plot`.
+        return Err(crate::error::Error::invalid(
+            &report.session_file,
+            "the session's path is not valid UTF-8, which fit.json cannot record: rename the folder",
+        ));
+    }
+    let now = crate::formats::fingerprint::of_files(&report.input_files())?;
+    Ok((report, now))
+}
+
+/// The fit.json an identical earlier run wrote ([`cached`]), said in its `skipped`.
+fn reused(
+    opts: &Options,
+    report: &session::SessionReport,
+    now: &crate::formats::fingerprint::Inputs,
+    t0: Instant,
+) -> Option<FitFile> {
+    let (mut f, out) = cached(opts, report, now)?;
+    f.skipped.insert(
+        0,
+        format!(
+            "solve: {} reused (its inputs unchanged by content, same options; {:.3} s instead of {:.2} s)",
+            out.display(),
+            t0.elapsed().as_secs_f64(),
+            f.timings.total_s
+        ),
+    );
+    Some(f)
 }
 
 /// `--holdout r` names a radius the session has, and leaves another to fit.

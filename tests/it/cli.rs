@@ -309,6 +309,12 @@ fn solve_writes_fit_json_and_refuses_bad_options() {
         serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
     assert_eq!(v["schema"], "workbench.fit/1");
     assert_eq!(v["sigma0_mm"].as_array().unwrap().len(), 3);
+    // `--model auto` (the default) without the irradiance: the CDRF alone, and the summary says so.
+    assert!(v.get("medium").is_none());
+    assert!(
+        stdout.contains("skipped  medium: the light's irradiance is unknown"),
+        "{stdout}"
+    );
     // Detection ran once and, --out lying in another folder, wrote detections.json beside the
     // fit, not into the session folder.
     assert!(dir.path().join("detections.json").is_file());

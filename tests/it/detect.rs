@@ -694,8 +694,9 @@ fn outline_mean_errors(dir: &Path, medium: bool) -> [f64; 2] {
 /// T(φ)·cos φ term"). Asserted against truth.json: the medium's outlines' mean radius and centre
 /// errors within 0.06 px, the shared ones' beyond 0.1 px; those (what the highlights, the light
 /// and the CDRF use) the same whichever model asked, to the bit; only the medium's detections
-/// hold the medium's outlines; and `solve --model medium` detects again over the CDRF's detections, then
-/// reuses its own.
+/// hold the medium's outlines (`auto` draws them only with a reference in session.json); and a
+/// solve that fits the medium (`auto`, the irradiance given) detects again over the CDRF's
+/// detections, then reuses its own.
 #[test]
 fn the_medium_draws_its_outlines_on_its_own_edge_model() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/pbr-seeds/jade-6");
@@ -716,6 +717,9 @@ fn the_medium_draws_its_outlines_on_its_own_edge_model() {
     };
     let (with_medium, noise, contrast) = detect("medium");
     let (cdrf, noise_cdrf, none) = detect("cdrf");
+    // `auto` (the default) draws them only where session.json names a reference; this has none.
+    let (_, _, auto) = detect("auto");
+    assert!(auto.is_none(), "auto without a reference: {auto:?}");
     println!("mean radius, centre x error (px): noise {noise:.3?}, the medium's {contrast:.3?}");
     let contrast = contrast.expect("the medium's outlines");
     assert!(
@@ -732,14 +736,8 @@ fn the_medium_draws_its_outlines_on_its_own_edge_model() {
     assert!(contrast.iter().all(|e| e.abs() < 0.06), "{contrast:?}");
     assert!(noise.iter().all(|e| e.abs() > 0.1), "{noise:?}");
     let solve = |extra: &[&str]| {
-        let mut args = vec![
-            "solve",
-            d,
-            "--model",
-            "medium",
-            "--irradiance",
-            "5.392961114328331",
-        ];
+        // `--model auto` (the default): the irradiance given, the medium is fitted.
+        let mut args = vec!["solve", d, "--irradiance", "5.392961114328331"];
         args.extend(extra);
         let (code, out, err) = common::wb(&args);
         assert_eq!(code, 0, "{err}");
@@ -748,7 +746,7 @@ fn the_medium_draws_its_outlines_on_its_own_edge_model() {
     let first = solve(&[]);
     assert!(
         first.contains(
-            "detection: ran (detections.json has no outlines drawn for the medium, which --model medium needs)"
+            "detection: ran (detections.json has no outlines drawn for the medium, which the medium fit needs)"
         ),
         "{first}"
     );

@@ -180,7 +180,10 @@ fn a_known_irradiance_makes_eta_measurable() {
     let dir = guard.path();
     let t = truth(dir);
     // The synthetic light's irradiance is 1 in radiance units (ks = 1 is the physical lobe).
-    let f = solve_with(dir, "fit-irradiance.json", |o| o.fit.irradiance = Some(1.0));
+    let f = solve_with(dir, "fit-irradiance.json", |o| {
+        o.fit.irradiance = Some(1.0);
+        o.model = workbench::solve::SolveModel::Cdrf;
+    });
     println!(
         "irradiance 1: η {:.4} ± {:.4} (truth {}), σ0 worst {:.3}%",
         f.eta,
@@ -1208,6 +1211,11 @@ fn a_grey_card_gives_the_irradiance() {
     assert_eq!(code, 0, "{err}");
     let f = fit_of(with_card.path());
     println!("facing the light: E {:.6} (truth {e:.6})", ks(&f));
+    // With the irradiance known, `--model auto` (the default) fits the medium too.
+    let medium = f
+        .medium
+        .as_ref()
+        .expect("the medium, the irradiance being known");
     let value = 0.5 * e / std::f64::consts::PI;
     assert!(
         (ks(&f) / e - 1.0).abs() < quantised(value),
@@ -1243,6 +1251,11 @@ fn a_grey_card_gives_the_irradiance() {
             b.value
         );
     }
+    let given = g.medium.as_ref().expect("the medium, --irradiance given");
+    let (a, b) = (medium.sigma_a_per_mm.value, given.sigma_a_per_mm.value);
+    for c in 0..3 {
+        assert!((a[c] - b[c]).abs() <= 1e-6 * b[c], "{a:?} {b:?}");
+    }
     // Facing the camera: cos θ = −l_z, read with the detected light (its error enters E as
     // tan θ × the light's error, which the note states).
     let facing_camera = common::session_copy(&src);
@@ -1253,7 +1266,7 @@ fn a_grey_card_gives_the_irradiance() {
         inside,
         true,
     );
-    let (code, _, err) = solve(facing_camera.path(), &[]);
+    let (code, _, err) = solve(facing_camera.path(), &["--model", "cdrf"]);
     assert_eq!(code, 0, "{err}");
     let f = fit_of(facing_camera.path());
     let det: serde_json::Value = serde_json::from_str(

@@ -289,7 +289,10 @@ fn index_of_refraction_from_1_0001_to_3() {
         "eta 3, irradiance",
         config(|c| c.material.eta = 3.0),
         None,
-        |o| o.fit.irradiance = Some(1.0),
+        |o| {
+            o.fit.irradiance = Some(1.0);
+            o.model = workbench::solve::SolveModel::Cdrf;
+        },
         0.025,
         0.2,
     );
@@ -366,7 +369,10 @@ fn grazing_camera_and_back_lights() {
         "light at the camera, irradiance",
         config(|c| c.light = light(0.0, 0.0)),
         None,
-        |o| o.fit.irradiance = Some(1.0),
+        |o| {
+            o.fit.irradiance = Some(1.0);
+            o.model = workbench::solve::SolveModel::Cdrf;
+        },
         0.03,
         0.3,
     );
