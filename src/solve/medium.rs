@@ -5,6 +5,7 @@
 use super::load::Loaded;
 use super::options::{Options, SolveModel};
 use super::outcome::Outcome;
+use super::summary::pm;
 use crate::camera::outline::Outline;
 use crate::detect::silhouette::EDGE_MODEL_ERROR;
 use crate::error::{Error, Result};
@@ -382,17 +383,23 @@ fn say(f: &MediumFit, notes: &mut Vec<String>) {
     let (eta, eta_std) = f.derived().eta;
     notes.push(if f.eta_sources.joint_combined {
         format!(
-            "medium: η {eta:.3} ± {eta_std:.3} combines the joint fit's {j:.3} ± {js:.3} and the medium's pixels' {p:.3} ± {ps:.3} (their errors include each one's own error on physically based renders, and the joint fit's the shift its η–α correlation gives for its lobe's α against the α measured here; docs/medium.md)"
+            "medium: η {} combines the joint fit's {} and the medium's pixels' {} (their errors include each one's own error on physically based renders, and the joint fit's the shift its η–α correlation gives for its lobe's α against the α measured here; docs/medium.md)",
+            pm(eta, eta_std, 3),
+            pm(j, js, 3),
+            pm(p, ps, 3)
         )
     } else {
         format!(
-            "medium: η {eta:.3} ± {eta_std:.3} is the medium's pixels' (its error includes the model's own on physically based renders); the joint fit's {j:.3} ± {js:.3} is left out, its model not describing the photos (docs/medium.md, \"The joint fit's η left out where its model misses the photos\")"
+            "medium: η {} is the medium's pixels' (its error includes the model's own on physically based renders); the joint fit's {} is left out, its model not describing the photos (docs/medium.md, \"The joint fit's η left out where its model misses the photos\")",
+            pm(eta, eta_std, 3),
+            pm(j, js, 3)
         )
     });
     match (f.alpha_std, f.alpha_lobe) {
         (Some(std), Some((lobe, lobe_std))) => notes.push(format!(
-            "medium: the boundary's roughness α {:.3} ± {std:.3} is the medium's pixels' (its level and terminator), with the joint fit's lobe α {lobe:.3} ± {lobe_std:.3} as its prior; its error includes the model's own {:.0}% (docs/medium.md)",
-            f.alpha,
+            "medium: the boundary's roughness α {} is the medium's pixels' (its level and terminator), with the joint fit's lobe α {} as its prior; its error includes the model's own {:.0}% (docs/medium.md)",
+            pm(f.alpha, std, 3),
+            pm(lobe, lobe_std, 3),
             100.0 * MODEL_ERROR.alpha
         )),
         _ => notes.push(format!(

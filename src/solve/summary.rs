@@ -31,7 +31,7 @@ fn status(f: &FitFile, name: &str) -> String {
 /// A value and its standard error, to `digits` decimals: `± unbounded` where the data do not
 /// bound it (fit.json's `null` with a reason; [`unbounded`]), `± not determined` for a failed
 /// fit's.
-fn pm(v: f64, e: f64, digits: usize) -> String {
+pub(super) fn pm(v: f64, e: f64, digits: usize) -> String {
     if unbounded(v, e) {
         format!("{v:.digits$} ± unbounded")
     } else if e.is_nan() {
