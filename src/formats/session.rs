@@ -328,6 +328,9 @@ pub struct SessionReport {
     pub intrinsics_file: Option<PathBuf>,
     pub camera: Option<crate::camera::Camera>,
     pub images: Vec<ImageInfo>,
+    /// Whether session.json names a diffuse reference (`reference`: a grey card in one photo).
+    #[serde(skip)]
+    pub has_reference: bool,
 }
 
 impl SessionReport {
@@ -523,5 +526,6 @@ pub fn inspect(path: &Path) -> Result<SessionReport> {
         intrinsics_file,
         camera,
         images,
+        has_reference: s.reference.is_some(),
     })
 }

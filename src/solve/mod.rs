@@ -47,11 +47,7 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let asked = load::fingerprint(opts);
     // `--model auto` stands for the medium or the CDRF alone from here on.
     let mut model_skipped = vec![];
-    let resolved = options::resolved(
-        opts,
-        &session::Session::load(&report.session_file)?.0,
-        &mut model_skipped,
-    );
+    let resolved = options::resolved(opts, report.has_reference, &mut model_skipped);
     let opts = &resolved;
     let mut l = load_inspected(opts, report, now, t0)?;
     l.skipped.append(&mut model_skipped);

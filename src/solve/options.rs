@@ -90,15 +90,11 @@ impl SolveModel {
     }
 }
 
-/// `opts` with its model resolved ([`SolveModel::resolve`]) for `session`: the irradiance is
-/// known where `--irradiance` gives it or session.json names a diffuse reference. Without a
+/// `opts` with its model resolved ([`SolveModel::resolve`]): the irradiance is known where
+/// `--irradiance` gives it or session.json names a diffuse reference (`has_reference`). Without a
 /// medium, `skipped` says why and how to ask for it.
-pub(super) fn resolved(
-    opts: &Options,
-    session: &crate::formats::session::Session,
-    skipped: &mut Vec<String>,
-) -> Options {
-    let known = opts.fit.irradiance.is_some() || session.reference.is_some();
+pub(super) fn resolved(opts: &Options, has_reference: bool, skipped: &mut Vec<String>) -> Options {
+    let known = opts.fit.irradiance.is_some() || has_reference;
     let model = opts.model.resolve(opts.method, known);
     if opts.model == SolveModel::Auto && model == SolveModel::Cdrf {
         skipped.extend(match (known, opts.method) {
