@@ -91,7 +91,7 @@ pub(super) fn run(
     spheres: &[SphereData],
     outcome: &Outcome,
     is_held: impl Fn(&SphereData) -> bool,
-    notes: &mut Vec<String>,
+    (notes, skipped): (&mut Vec<String>, &mut Vec<String>),
 ) -> Option<MediumJson> {
     let p = &outcome.params;
     let m = &p.material;
@@ -136,6 +136,14 @@ pub(super) fn run(
     let held: Vec<&SphereData> = spheres.iter().filter(|s| is_held(s)).collect();
     let holdout = (!held.is_empty()).then(|| holdout(&f, &setup, outcome, &held));
     f.seconds = t0.elapsed().as_secs_f64();
+    if f.samples < f.pixels {
+        skipped.push(format!(
+            "medium pixels: {} pixel-channels fitted as {} blocks (spheres of more than {} fitted pixels in blocks of b×b, each its mean and that mean's noise)",
+            f.pixels,
+            f.samples,
+            medium::MAX_PIXELS_A_SPHERE
+        ));
+    }
     say(&f, notes);
     Some(json(&f, holdout, given_by))
 }
@@ -300,14 +308,15 @@ pub fn outline_error<'a>(
     })
 }
 
-/// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels.
+/// The held-out spheres predicted by the medium and by the CDRF, on the medium's pixels (each
+/// on its own, however large the sphere).
 fn holdout(
     f: &MediumFit,
     setup: &Setup,
     outcome: &Outcome,
     held: &[&SphereData],
 ) -> MediumHoldoutJson {
-    let radii: Vec<Radius> = medium::pixels(held, &setup.light);
+    let radii: Vec<Radius> = medium::each_pixel(held, &setup.light);
     let (mut d_medium, mut d_cdrf, mut o2, mut n) = (0.0, 0.0, 0.0, 0);
     for r in &radii {
         let predicted = medium::predict(f, setup, r);

@@ -112,10 +112,19 @@ pub fn run(opts: &Options) -> Result<FitFile> {
     let medium_spheres = (opts.model == SolveModel::Medium)
         .then(|| medium::medium_spheres(&l, &l.spheres))
         .flatten();
+    let mut medium_skipped = vec![];
     let medium = medium_spheres.as_ref().and_then(|spheres| {
         let source = irradiance::source(reference.as_ref());
-        medium::run(opts, (&l, &source), spheres, &outcome, is_held, &mut notes)
+        medium::run(
+            opts,
+            (&l, &source),
+            spheres,
+            &outcome,
+            is_held,
+            (&mut notes, &mut medium_skipped),
+        )
     });
+    l.skipped.append(&mut medium_skipped);
     l.timings.medium_s = medium.as_ref().map_or(0.0, |m| m.seconds);
     let mut fit = fit_file(opts, &l, outcome, spheres, holdout, notes, t0);
     fit.options = asked;

@@ -37,7 +37,8 @@ use std::time::Instant;
 pub use derived::{Derived, PerChannel};
 pub use errors::{misfit, ModelError, MODEL_ERROR, WAVE_CALIBRATED};
 pub use pixels::{
-    described, fitted, fitted_obs, pixels, pixels_moved, pixels_seen, Px, Radius, Setup,
+    block_side, described, each_pixel, fitted, fitted_obs, pixels, pixels_at_most, pixels_moved,
+    pixels_seen, Px, Radius, Setup, MAX_PIXELS_A_SPHERE,
 };
 
 /// The medium fit's result.
@@ -63,7 +64,10 @@ pub struct MediumFit {
     pub residual_over_noise: f64,
     /// The residuals' wave over its noise ([`crate::fit::wave`]).
     pub wave_over_noise: f64,
+    /// Pixel-channels fitted, and the rows they were fitted as (fewer where a large sphere's
+    /// pixels were fitted in blocks: [`MAX_PIXELS_A_SPHERE`]).
     pub pixels: usize,
+    pub samples: usize,
     pub radii: Vec<f64>,
     /// Profiles computed (the nodes of the fit's atlas), and the solver's evaluations.
     pub profiles: usize,
@@ -352,7 +356,12 @@ pub fn fit(radii: &[Radius], setup: &Setup, start: &[f64], held: &Held) -> Mediu
         std_jackknife: errors.std_jackknife,
         residual_over_noise: errors.residual_over_noise,
         wave_over_noise: errors.wave.over_noise,
-        pixels: problem.pixel_rows(),
+        pixels: radii
+            .iter()
+            .flat_map(|r| r.pixels.iter().flatten())
+            .map(|p| p.members)
+            .sum::<f64>() as usize,
+        samples: problem.pixel_rows(),
         radii: radii.iter().map(|r| r.radius_mm).collect(),
         profiles,
         evaluations: free.1.number_of_evaluations + report.number_of_evaluations,

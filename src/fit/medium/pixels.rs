@@ -1,6 +1,7 @@
 //! The medium fit's inputs: what it is given besides the pixels ([`Setup`]), and the pixels it
 //! fits, pooled by radius ([`pixels`]).
 
+use crate::fit::noise::IMPULSE_SIGMA;
 use crate::fit::observe::SphereData;
 use nalgebra::Vector3;
 
@@ -40,6 +41,8 @@ pub struct Px {
     pub radiance: f64,
     /// 1/σ of its noise.
     pub weight: f64,
+    /// The pixels it stands for: 1, or a block's ([`MAX_PIXELS_A_SPHERE`]).
+    pub members: f64,
 }
 
 impl Px {
@@ -57,6 +60,7 @@ impl Px {
             cos_light_view: light.dot(v),
             radiance,
             weight,
+            members: 1.0,
         }
     }
 }
@@ -96,40 +100,86 @@ pub fn fitted_obs(o: &crate::fit::solver::Obs, light: &Vector3<f64>) -> bool {
 /// along the transmitted light's mean direction (docs/medium.md, "The deepest shadow fitted").
 pub const MAX_THETA_DEG: f64 = 105.0;
 
-/// The spheres' fitted pixels, pooled by radius (in increasing radius).
+/// The most fitted pixels a sphere gives the medium fit one by one. A sphere with more (a photo of
+/// more megapixels than the physically based sessions') gives square blocks of b×b pixels
+/// instead, b the least that brings it to about this many ([`block_side`]): the fit's cost and
+/// memory then stop growing with the photo's resolution while its angular resolution stays
+/// that of the sessions its accuracy was measured on (pbr-jade's 35 mm sphere, the largest,
+/// 24 000 fitted pixels; the physically based sessions' others 1500–15 000). Each block is one
+/// observation: the members' mean radiance, the noise of that mean, and the normal and view of
+/// their mean (docs/medium.md, "The medium fit", step 1).
+pub const MAX_PIXELS_A_SPHERE: usize = 32_768;
+
+/// The side of the blocks a sphere of `fitted` pixels gives the medium fit (1: each pixel
+/// alone): the least b with ⌈fitted / b²⌉ at most [`MAX_PIXELS_A_SPHERE`].
+pub fn block_side(fitted: usize) -> u32 {
+    side_for(fitted, MAX_PIXELS_A_SPHERE)
+}
+
+/// The least b with ⌈fitted / b²⌉ at most `per_sphere` (at least 1).
+fn side_for(fitted: usize, per_sphere: usize) -> u32 {
+    let mut b = 1u32;
+    while fitted.div_ceil((b * b) as usize) > per_sphere.max(1) {
+        b += 1;
+    }
+    b
+}
+
+/// The spheres' fitted pixels, pooled by radius (in increasing radius), a large sphere's in
+/// blocks ([`MAX_PIXELS_A_SPHERE`]).
 pub fn pixels(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
     pixels_seen(spheres, light, light)
 }
 
+/// [`pixels`] with a sphere of more than `per_sphere` fitted pixels in blocks ([`block_side`]'s
+/// rule with `per_sphere` for [`MAX_PIXELS_A_SPHERE`]).
+pub fn pixels_at_most(
+    spheres: &[&SphereData],
+    light: &Vector3<f64>,
+    per_sphere: usize,
+) -> Vec<Radius> {
+    pool(spheres, light, light, |_, _| None, Some(per_sphere))
+}
+
+/// Every fitted pixel of the spheres on its own, pooled by radius (in increasing radius), however
+/// many a sphere has: what a prediction is scored on (the held-out radius).
+pub fn each_pixel(spheres: &[&SphereData], light: &Vector3<f64>) -> Vec<Radius> {
+    pool(spheres, light, light, |_, _| None, None)
+}
+
 /// The pixels [`pixels`] chooses under `light`, their cosines taken under `seen`: the same
-/// pixels in the same order under a moved light (the fit's sensitivity to the light).
+/// pixels (and blocks) in the same order under a moved light (the fit's sensitivity to the
+/// light).
 pub fn pixels_seen(
     spheres: &[&SphereData],
     light: &Vector3<f64>,
     seen: &Vector3<f64>,
 ) -> Vec<Radius> {
-    pool(spheres, light, seen, |_, _| None)
+    pool(spheres, light, seen, |_, _| None, Some(MAX_PIXELS_A_SPHERE))
 }
 
 /// The pixels [`pixels`] chooses under `light`, each with the normal and view `moved` gives it
-/// (by sphere and observation; `None`: its own): the same pixels in the same order on a moved
-/// sphere (the fit's sensitivity to the spheres' outlines).
+/// (by sphere and observation; `None`: its own): the same pixels (and blocks) in the same order
+/// on a moved sphere (the fit's sensitivity to the spheres' outlines).
 pub fn pixels_moved(
     spheres: &[&SphereData],
     light: &Vector3<f64>,
     moved: impl Fn(usize, usize) -> Option<(Vector3<f64>, Vector3<f64>)>,
 ) -> Vec<Radius> {
-    pool(spheres, light, light, moved)
+    pool(spheres, light, light, moved, Some(MAX_PIXELS_A_SPHERE))
 }
 
 /// The spheres' pixels fitted under `light`, pooled by radius (in increasing radius), their
 /// cosines taken under `seen` with the geometry `moved` gives (by sphere and observation;
-/// `None`: the observation's own).
+/// `None`: the observation's own); a sphere of more than `per_sphere` fitted pixels (None: no
+/// limit) in blocks ([`blocks`]), which the fitted pixels under `light` and their places in the
+/// photo choose, so that a moved light or outline keeps them.
 fn pool(
     spheres: &[&SphereData],
     light: &Vector3<f64>,
     seen: &Vector3<f64>,
     moved: impl Fn(usize, usize) -> Option<(Vector3<f64>, Vector3<f64>)>,
+    per_sphere: Option<usize>,
 ) -> Vec<Radius> {
     let mut radii: Vec<Radius> = Vec::new();
     for (i, s) in spheres.iter().enumerate() {
@@ -146,16 +196,31 @@ fn pool(
                 radii.len() - 1
             }
         };
-        for (k, (o, w)) in s.obs.iter().zip(&s.curve_weight).enumerate() {
-            let (n, v) = (o.geometry.normal, o.geometry.view);
-            if !fitted(&n, &v, light) {
-                continue;
-            }
-            let (n, v) = moved(i, k).unwrap_or((n, v));
-            for (c, pixels) in radii[at].pixels.iter_mut().enumerate() {
-                if o.weight[c] > 0.0 {
-                    pixels.push(Px::at(&n, &v, seen, o.radiance[c], w[c]));
+        let fitted: Vec<usize> = (0..s.obs.len())
+            .filter(|&k| {
+                let g = &s.obs[k].geometry;
+                fitted(&g.normal, &g.view, light)
+            })
+            .collect();
+        let side = per_sphere.map_or(1, |m| side_for(fitted.len(), m));
+        let geometry = |k: usize| {
+            let g = &s.obs[k].geometry;
+            moved(i, k).unwrap_or((g.normal, g.view))
+        };
+        if side == 1 {
+            for k in fitted {
+                let (o, w) = (&s.obs[k], &s.curve_weight[k]);
+                let (n, v) = geometry(k);
+                for (c, pixels) in radii[at].pixels.iter_mut().enumerate() {
+                    if o.weight[c] > 0.0 {
+                        pixels.push(Px::at(&n, &v, seen, o.radiance[c], w[c]));
+                    }
                 }
+            }
+        } else {
+            let pooled = self::blocks(s, &fitted, side, geometry, seen);
+            for (pixels, pooled) in radii[at].pixels.iter_mut().zip(pooled) {
+                pixels.extend(pooled);
             }
         }
     }
@@ -163,3 +228,117 @@ fn pool(
     radii.sort_by(|a, b| a.radius_mm.total_cmp(&b.radius_mm));
     radii
 }
+
+/// One block of pixels in one channel, accumulated: its members, their radiance and noise
+/// variance summed, and their normals and views summed.
+#[derive(Clone, Copy)]
+struct Block {
+    members: f64,
+    radiance: f64,
+    variance: f64,
+    normal: Vector3<f64>,
+    view: Vector3<f64>,
+}
+
+impl Block {
+    const EMPTY: Block = Block {
+        members: 0.0,
+        radiance: 0.0,
+        variance: 0.0,
+        normal: Vector3::new(0.0, 0.0, 0.0),
+        view: Vector3::new(0.0, 0.0, 0.0),
+    };
+}
+
+/// Sphere `s`'s `fitted` observations in blocks of `side`×`side` pixels of its photo, per
+/// channel (each channel's members those it weighs), in the order their first members come:
+/// each block the mean of its members' radiance, the noise of that mean, and the normal and
+/// view of the mean of theirs (`geometry`), its cosines under `seen`. The noise of the mean is
+/// its members' σ as independent (n/√Σσᵢ²) times the sphere's [`block_noise_factor`] for the
+/// channel: neighbouring pixels' noise is correlated (a render's filter, a camera's
+/// demosaicing), which differences of adjacent pixels, the noise curve's measure, do not see.
+fn blocks(
+    s: &SphereData,
+    fitted: &[usize],
+    side: u32,
+    geometry: impl Fn(usize) -> (Vector3<f64>, Vector3<f64>),
+    seen: &Vector3<f64>,
+) -> [Vec<Px>; 3] {
+    let mut index: std::collections::HashMap<[u32; 2], usize> = Default::default();
+    let mut acc: Vec<[Block; 3]> = vec![];
+    for &k in fitted {
+        let [x, y] = s.px[k];
+        let b = *index.entry([x / side, y / side]).or_insert_with(|| {
+            acc.push([Block::EMPTY; 3]);
+            acc.len() - 1
+        });
+        let (o, w) = (&s.obs[k], &s.curve_weight[k]);
+        let (n, v) = geometry(k);
+        for (c, block) in acc[b].iter_mut().enumerate() {
+            if o.weight[c] > 0.0 && w[c] > 0.0 {
+                block.members += 1.0;
+                block.radiance += o.radiance[c];
+                block.variance += (1.0 / w[c]).powi(2);
+                block.normal += n;
+                block.view += v;
+            }
+        }
+    }
+    std::array::from_fn(|c| {
+        let factor = block_noise_factor(&index, &acc, c);
+        acc.iter()
+            .map(|b| b[c])
+            .filter(|b| b.members > 0.0)
+            .map(|b| Px {
+                members: b.members,
+                ..Px::at(
+                    &b.normal.normalize(),
+                    &b.view.normalize(),
+                    seen,
+                    b.radiance / b.members,
+                    b.members / (factor * b.variance.sqrt()),
+                )
+            })
+            .collect()
+    })
+}
+
+/// How much noisier channel `c`'s block means are than their members' σ as independent says
+/// (at least 1): from each block's difference to the mean of its left and right neighbours
+/// (which a smooth shading's gradient does not reach, and its curvature hardly), whose variance
+/// is σⱼ² + (σₗ² + σᵣ²)/4 for independent blocks, the RMS of those differences over it. A
+/// difference beyond [`IMPULSE_SIGMA`] of it is left out; fewer than [`FACTOR_BLOCKS`] blocks
+/// with both neighbours: 1.
+fn block_noise_factor(
+    index: &std::collections::HashMap<[u32; 2], usize>,
+    acc: &[[Block; 3]],
+    c: usize,
+) -> f64 {
+    let at = |key: [u32; 2]| {
+        index
+            .get(&key)
+            .map(|&i| acc[i][c])
+            .filter(|b| b.members > 0.0)
+    };
+    let mean_and_var = |b: Block| (b.radiance / b.members, b.variance / (b.members * b.members));
+    let ratios: Vec<f64> = index
+        .iter()
+        .filter_map(|(&[x, y], _)| {
+            let (m, v) = mean_and_var(at([x, y])?);
+            let (ml, vl) = mean_and_var(at([x.checked_sub(1)?, y])?);
+            let (mr, vr) = mean_and_var(at([x + 1, y])?);
+            let d = m - 0.5 * (ml + mr);
+            Some(d * d / (v + 0.25 * (vl + vr)))
+        })
+        .filter(|r| *r < IMPULSE_SIGMA * IMPULSE_SIGMA)
+        .collect();
+    if ratios.len() < FACTOR_BLOCKS {
+        return 1.0;
+    }
+    (ratios.iter().sum::<f64>() / ratios.len() as f64)
+        .sqrt()
+        .max(1.0)
+}
+
+/// The blocks with both neighbours a channel needs for [`block_noise_factor`].
+const FACTOR_BLOCKS: usize = 50;

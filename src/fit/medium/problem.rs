@@ -539,6 +539,7 @@ pub(super) mod tests {
                                 cos_light_view: 0.5,
                                 radiance: 0.0,
                                 weight: 0.0,
+                                members: 1.0,
                             };
                             let l = predicted(
                                 p.irradiance[c],
