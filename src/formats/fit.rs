@@ -294,7 +294,8 @@ pub struct MediumJson {
     /// it was not carried, and in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub std_from_outlines: Option<CarriedStdJson>,
-    /// The residuals' RMS over the pixels' noise.
+    /// The residuals' RMS over the pixels' noise, per pixel (a block of pixels counted as its
+    /// pixels: `fit::medium::MAX_PIXELS_A_SPHERE`).
     #[serde(deserialize_with = "nullable::f64")]
     pub residual_over_noise: f64,
     /// The residuals averaged over 5° bands of θ per radius and channel, against their noise:
@@ -303,6 +304,11 @@ pub struct MediumJson {
     pub wave_over_noise: Option<f64>,
     /// Pixel-channels fitted, and the radii they came from.
     pub pixels: usize,
+    /// The rows they were fitted as where fewer (a sphere of more than
+    /// `fit::medium::MAX_PIXELS_A_SPHERE` fitted pixels in blocks); absent where every pixel
+    /// was its own row.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blocks: Option<usize>,
     #[serde(deserialize_with = "nullable::vec")]
     pub radii_mm: Vec<f64>,
     /// The held-out radius predicted by the medium and by the joint fit's CDRF, on the same

@@ -541,6 +541,7 @@ fn json(f: &MediumFit, holdout: Option<MediumHoldoutJson>, given_by: &str) -> Me
         residual_over_noise: f.residual_over_noise,
         wave_over_noise: f.wave_over_noise.is_finite().then_some(f.wave_over_noise),
         pixels: f.pixels,
+        blocks: (f.samples < f.pixels).then_some(f.samples),
         radii_mm: f.radii.clone(),
         holdout,
         converged: f.converged,
