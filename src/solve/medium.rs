@@ -138,7 +138,7 @@ pub(super) fn run(
     f.seconds = t0.elapsed().as_secs_f64();
     if f.samples < f.pixels {
         skipped.push(format!(
-            "medium pixels: {} pixel-channels fitted as {} blocks (spheres of more than {} fitted pixels in blocks of b×b, each its mean and that mean's noise)",
+            "medium pixels: {} pixel-channels fitted as {} rows, a sphere of more than {} fitted pixels in blocks of b×b pixels (each block its pixels' mean, with that mean's noise; docs/medium.md, \"Large photos: the pixels in blocks\")",
             f.pixels,
             f.samples,
             medium::MAX_PIXELS_A_SPHERE
