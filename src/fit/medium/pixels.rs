@@ -196,19 +196,20 @@ fn pool(
                 radii.len() - 1
             }
         };
-        let fitted: Vec<usize> = (0..s.obs.len())
+        // The observations fitted under the unmoved light, by index.
+        let kept: Vec<usize> = (0..s.obs.len())
             .filter(|&k| {
                 let g = &s.obs[k].geometry;
                 fitted(&g.normal, &g.view, light)
             })
             .collect();
-        let side = per_sphere.map_or(1, |m| side_for(fitted.len(), m));
+        let side = per_sphere.map_or(1, |m| side_for(kept.len(), m));
         let geometry = |k: usize| {
             let g = &s.obs[k].geometry;
             moved(i, k).unwrap_or((g.normal, g.view))
         };
         if side == 1 {
-            for k in fitted {
+            for k in kept {
                 let (o, w) = (&s.obs[k], &s.curve_weight[k]);
                 let (n, v) = geometry(k);
                 for (c, pixels) in radii[at].pixels.iter_mut().enumerate() {
@@ -218,7 +219,7 @@ fn pool(
                 }
             }
         } else {
-            let pooled = self::blocks(s, &fitted, side, geometry, seen);
+            let pooled = blocks(s, &kept, side, geometry, seen);
             for (pixels, pooled) in radii[at].pixels.iter_mut().zip(pooled) {
                 pixels.extend(pooled);
             }
